@@ -1,0 +1,48 @@
+//! The command-line interface: argument parsing (clap) and one module per subcommand.
+//!
+//! Owns turning command-line words into calls into the library and results into output.
+//! Each subcommand returns an exit code (`ExitCode`) or an error that `main` reports.
+
+mod calib;
+
+use clap::{Parser, Subcommand};
+use std::process::ExitCode;
+
+/// Crop-row and vanishing-point detection for omnidirectional cameras.
+#[derive(Debug, Parser)]
+#[command(name = "omnirow", version, about, long_about = None)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Inspect or produce calibrations.
+    #[command(subcommand)]
+    Calib(calib::CalibCommand),
+}
+
+/// Parses the process arguments and runs the command.
+pub fn main() -> anyhow::Result<ExitCode> {
+    let cli = Cli::parse();
+    init_logging();
+    match cli.command {
+        Command::Calib(c) => calib::run(c),
+    }
+}
+
+/// Logs through tracing to stderr; `RUST_LOG` filters, `OMNIROW_LOG_FORMAT=json` selects JSON.
+pub fn init_logging() {
+    use tracing_subscriber::EnvFilter;
+    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"));
+    let json = std::env::var("OMNIROW_LOG_FORMAT").is_ok_and(|v| v == "json");
+    let builder = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr);
+    let _ = if json {
+        builder.json().try_init()
+    } else {
+        builder.try_init()
+    };
+}

@@ -1,0 +1,11 @@
+//! omnirow: crop-row and vanishing-point detection for field robots with an omnidirectional
+//! (fisheye or catadioptric) camera, after Ericson and Åstrand, "Row-detection on an
+//! agricultural field using omnidirectional camera".
+//!
+//! The library is organised one concept per module: the camera model ([`camera`]), geometry on
+//! the unit sphere ([`sphere`]), the synthetic field with ground truth ([`synth`]), and the
+//! command-line front end ([`cli`]) that the thin binary calls.
+
+pub mod camera;
+pub mod cli;
+pub mod sphere;
