@@ -8,4 +8,7 @@
 
 pub mod camera;
 pub mod cli;
+pub mod detect;
+pub mod frame;
 pub mod sphere;
+pub mod synth;

@@ -1,0 +1,141 @@
+//! Frames: the image data that flows from a source through the pipeline.
+//!
+//! Owns [`Frame`] (an owned image plus its sequence number, capture and receive timestamps,
+//! and, for synthetic frames, the ground truth) and [`ImageView`], the borrowed view the
+//! detector reads. Pixel formats are those the GC2450C and recordings deliver: Mono8, RGB8,
+//! and 8-bit Bayer RGGB (GenICam `BayerRG8`).
+
+use std::sync::Arc;
+
+/// Pixel layout of a frame's bytes (row-major, no padding).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PixelFormat {
+    /// One byte per pixel, grey.
+    Mono8,
+    /// Three bytes per pixel, R G B.
+    Rgb8,
+    /// One byte per pixel, Bayer mosaic with R at (0,0), G at (0,1) and (1,0), B at (1,1).
+    BayerRggb8,
+}
+
+impl PixelFormat {
+    /// Bytes per pixel.
+    pub fn bytes_per_pixel(self) -> usize {
+        match self {
+            PixelFormat::Mono8 | PixelFormat::BayerRggb8 => 1,
+            PixelFormat::Rgb8 => 3,
+        }
+    }
+
+    /// The ROS 2 `sensor_msgs/Image` encoding name.
+    pub fn ros_encoding(self) -> &'static str {
+        match self {
+            PixelFormat::Mono8 => "mono8",
+            PixelFormat::Rgb8 => "rgb8",
+            PixelFormat::BayerRggb8 => "bayer_rggb8",
+        }
+    }
+
+    /// Parses a ROS 2 / Foxglove encoding name.
+    pub fn from_ros_encoding(enc: &str) -> Option<Self> {
+        match enc {
+            "mono8" | "8UC1" => Some(PixelFormat::Mono8),
+            "rgb8" => Some(PixelFormat::Rgb8),
+            "bayer_rggb8" => Some(PixelFormat::BayerRggb8),
+            _ => None,
+        }
+    }
+}
+
+/// Error for a frame whose size and data disagree.
+#[derive(Debug, thiserror::Error, PartialEq, Eq)]
+#[error("frame {width}x{height} {format:?} needs {expected} bytes, has {actual}")]
+pub struct FrameSizeError {
+    pub width: u32,
+    pub height: u32,
+    pub format: PixelFormat,
+    pub expected: usize,
+    pub actual: usize,
+}
+
+/// A borrowed image: what the detector reads.
+#[derive(Debug, Clone, Copy)]
+pub struct ImageView<'a> {
+    pub width: u32,
+    pub height: u32,
+    pub format: PixelFormat,
+    pub data: &'a [u8],
+}
+
+impl<'a> ImageView<'a> {
+    /// Wraps bytes, checking that their length matches the size and format.
+    pub fn new(
+        width: u32,
+        height: u32,
+        format: PixelFormat,
+        data: &'a [u8],
+    ) -> Result<Self, FrameSizeError> {
+        let expected = width as usize * height as usize * format.bytes_per_pixel();
+        if data.len() != expected {
+            return Err(FrameSizeError {
+                width,
+                height,
+                format,
+                expected,
+                actual: data.len(),
+            });
+        }
+        Ok(ImageView {
+            width,
+            height,
+            format,
+            data,
+        })
+    }
+}
+
+/// An owned frame travelling through the pipeline.
+#[derive(Debug, Clone)]
+pub struct Frame {
+    /// Sequence number assigned by the source (monotonic, gaps mean frames lost upstream).
+    pub seq: u64,
+    /// Capture time, nanoseconds since the UNIX epoch (camera or recording clock).
+    pub capture_ns: u64,
+    /// Host receive time, nanoseconds since the UNIX epoch.
+    pub receive_ns: u64,
+    pub width: u32,
+    pub height: u32,
+    pub format: PixelFormat,
+    pub data: Vec<u8>,
+    /// Ground truth, for synthetic frames.
+    pub truth: Option<Arc<crate::synth::GroundTruth>>,
+}
+
+impl Frame {
+    /// The frame's pixels as a view (checked).
+    pub fn view(&self) -> Result<ImageView<'_>, FrameSizeError> {
+        ImageView::new(self.width, self.height, self.format, &self.data)
+    }
+}
+
+/// Nanoseconds since the UNIX epoch, now.
+pub fn now_ns() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_nanos() as u64)
+        .unwrap_or(0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn view_checks_length() {
+        let data = vec![0u8; 12];
+        assert!(ImageView::new(2, 2, PixelFormat::Rgb8, &data).is_ok());
+        let e = ImageView::new(3, 2, PixelFormat::Rgb8, &data).unwrap_err();
+        assert_eq!(e.expected, 18);
+    }
+}
