@@ -4,6 +4,7 @@
 //! Each subcommand returns an exit code (`ExitCode`) or an error that `main` reports.
 
 mod calib;
+pub mod detect;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -21,6 +22,8 @@ pub enum Command {
     /// Inspect or produce calibrations.
     #[command(subcommand)]
     Calib(calib::CalibCommand),
+    /// Detect rows, their vanishing point, heading and tilt in images (one JSON line each).
+    Detect(detect::DetectArgs),
 }
 
 /// Parses the process arguments and runs the command.
@@ -29,6 +32,7 @@ pub fn main() -> anyhow::Result<ExitCode> {
     init_logging();
     match cli.command {
         Command::Calib(c) => calib::run(c),
+        Command::Detect(a) => detect::run(a),
     }
 }
 

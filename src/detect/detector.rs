@@ -105,6 +105,8 @@ struct Setup {
 #[derive(Debug, Clone)]
 pub struct Preparer {
     cal: Calibration,
+    /// The field-of-view mask is found from the image (the calibration has none).
+    fov_auto: bool,
     opts: DetectorOptions,
     gauss: Gaussian,
     user_mask: Option<GreyImage>,
@@ -128,6 +130,7 @@ impl Preparer {
             m.validate().map_err(DetectError::Calibration)?;
         }
         Ok(Preparer {
+            fov_auto: cal.mask.is_none(),
             cal: cal.clone(),
             opts: opts.clone(),
             gauss: Gaussian::new(&opts.smooth)?,
@@ -150,8 +153,34 @@ impl Preparer {
     /// Replaces the field-of-view mask (calibration's own pixels); `None` = find it from the
     /// next image if the calibration has none. Takes effect at the next image.
     pub fn set_fov_mask(&mut self, mask: Option<FovMask>) {
+        self.fov_auto = mask.is_none();
         self.cal.mask = mask;
         self.setup = None;
+    }
+
+    /// When the field-of-view mask is found from the image, finds it again in `view` and
+    /// rebuilds the setup if it moved by more than a pixel (for a sequence of images from
+    /// different cameras). Returns whether the setup was rebuilt.
+    pub fn refind_fov(&mut self, view: &ImageView) -> Result<bool, DetectError> {
+        if !self.fov_auto {
+            return Ok(false);
+        }
+        let Some(s) = &self.setup else {
+            return Ok(false);
+        };
+        if (s.width, s.height, s.format) != (view.width, view.height, view.format) {
+            return Ok(false);
+        }
+        let m = find_fov(view, (s.view_cal.model.xc, s.view_cal.model.yc))?;
+        let old = s.view_cal.mask.unwrap_or(m);
+        if (old.inner_radius_px - m.inner_radius_px).abs() > 1.0
+            || (old.outer_radius_px - m.outer_radius_px).abs() > 1.0
+        {
+            self.setup = None;
+            self.ensure_setup(view)?;
+            return Ok(true);
+        }
+        Ok(false)
     }
 
     /// The calibration as given.

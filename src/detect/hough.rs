@@ -381,7 +381,8 @@ impl HoughRows {
                 self.found.push(row);
             }
         }
-        self.found.sort_by_key(|r| std::cmp::Reverse(r.support));
+        self.found
+            .sort_unstable_by_key(|r| std::cmp::Reverse(r.support));
         let merge = self.opts.merge_angle_deg.to_radians();
         let start = rows.len();
         for row in &self.found {

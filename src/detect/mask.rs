@@ -146,11 +146,15 @@ pub fn build_mask(
     Ok(res)
 }
 
-/// Finds the lens's image circle (and a catadioptric lens's blind disc) from an image: the
-/// mean brightness on circles around the calibration's centre `(row, col)` (image pixels),
-/// dark outside the rim. Returns radii in the image's pixels.
+/// Finds the lens's image circle (and a catadioptric lens's blind disc) from an image.
+///
+/// On circles around the calibration's centre `(row, col)` (image pixels), the brightness
+/// varies with the angle wherever the lens sees the scene, and is flat (dark, or a uniform
+/// glow of stray light) outside the image circle. The rim is the radius beyond which every
+/// circle is flat; when the scene reaches the image corners, the circle is larger than the
+/// sensor. A blind disc is a flat dark region around the centre. Radii in image pixels.
 pub fn find_fov(view: &ImageView, centre: (f64, f64)) -> Result<FovMask, DetectError> {
-    const ANGLES: usize = 360;
+    const ANGLES: usize = 720;
     let (h, w) = (view.height as f64, view.width as f64);
     let err = |problem: String| DetectError::Image {
         height: view.height,
@@ -171,57 +175,78 @@ pub fn find_fov(view: &ImageView, centre: (f64, f64)) -> Result<FovMask, DetectE
     .map(|&(r, c): &(f64, f64)| (r - cr).hypot(c - cc))
     .fold(0.0, f64::max)
     .ceil() as usize;
-    // Radial profile: mean over the angles whose sample lies inside the image (NaN if none).
-    let mut sum = vec![0.0f64; max_r + 1];
-    let mut cnt = vec![0u32; max_r + 1];
     let dirs: Vec<(f64, f64)> = (0..ANGLES)
         .map(|k| (k as f64 * std::f64::consts::TAU / ANGLES as f64).sin_cos())
         .collect();
-    for (rad, (s, n)) in sum.iter_mut().zip(cnt.iter_mut()).enumerate() {
-        for &(sa, ca) in &dirs {
-            let r = (cr + rad as f64 * sa).round();
-            let c = (cc + rad as f64 * ca).round();
-            if r >= 0.0 && c >= 0.0 && r < h && c < w {
-                *s += super::vegetation::brightness_at(view, r as usize, c as usize) as f64;
-                *n += 1;
+    // Per radius: mean and standard deviation over the angles inside the image.
+    let stats: Vec<Option<(f64, f64)>> = (0..=max_r)
+        .map(|rad| {
+            let (mut s, mut s2, mut n) = (0.0, 0.0, 0u32);
+            for &(sa, ca) in &dirs {
+                let r = (cr + rad as f64 * sa).round();
+                let c = (cc + rad as f64 * ca).round();
+                if r >= 0.0 && c >= 0.0 && r < h && c < w {
+                    let v = super::vegetation::brightness_at(view, r as usize, c as usize) as f64;
+                    s += v;
+                    s2 += v * v;
+                    n += 1;
+                }
+            }
+            (n >= 8).then(|| {
+                let m = s / n as f64;
+                (m, (s2 / n as f64 - m * m).max(0.0).sqrt())
+            })
+        })
+        .collect();
+    let mut sds: Vec<f64> = stats.iter().flatten().map(|s| s.1).collect();
+    if sds.is_empty() {
+        return Err(err("no pixels around the calibration's centre".into()));
+    }
+    sds.sort_by(f64::total_cmp);
+    let textured = sds[sds.len() * 3 / 4];
+    if textured < 8.0 {
+        return Err(err(format!(
+            "image has no texture to find the lens's image circle in (angular deviation {textured:.1})"
+        )));
+    }
+    let flat_sd = (0.2 * textured).max(4.0);
+    let is_flat = |s: &Option<(f64, f64)>| !s.is_some_and(|(_, sd)| sd >= flat_sd);
+    // The rim: scanning inwards, the first radius textured for three radii in a row (a
+    // lone textured radius in the dark is noise). Textured within 2% of the corners: the
+    // circle is larger than the sensor.
+    let band = (max_r / 50).max(3);
+    let textured_at = |r: usize| !is_flat(&stats[r]);
+    let first = (2..=max_r)
+        .rev()
+        .find(|&r| textured_at(r) && textured_at(r - 1) && textured_at(r - 2));
+    let outer = match first {
+        Some(r) if r + band <= max_r => r as f64 + 0.5,
+        _ => max_r as f64,
+    };
+    // A blind disc: flat and dark around the centre.
+    let inside_mean = {
+        let v: Vec<f64> = stats
+            .iter()
+            .take(outer as usize)
+            .flatten()
+            .map(|s| s.0)
+            .collect();
+        v.iter().sum::<f64>() / v.len().max(1) as f64
+    };
+    let mut inner = 0.0;
+    for (rad, s) in stats.iter().enumerate().take(outer as usize) {
+        match s {
+            Some((m, sd)) if *sd < flat_sd && *m < 0.5 * inside_mean => {}
+            _ => {
+                if rad as f64 > 0.03 * outer {
+                    inner = rad as f64 - 0.5;
+                }
+                break;
             }
         }
     }
-    let profile: Vec<Option<f64>> = sum
-        .iter()
-        .zip(&cnt)
-        .map(|(&s, &n)| (n >= 8).then(|| s / n as f64))
-        .collect();
-    let mut vals: Vec<f64> = profile.iter().flatten().copied().collect();
-    if vals.is_empty() {
-        return Err(err("no pixels around the calibration's centre".into()));
-    }
-    vals.sort_by(f64::total_cmp);
-    let bright = vals[vals.len() * 9 / 10];
-    let thr = (0.2 * bright).max(6.0);
-    if bright < 12.0 {
-        return Err(err(format!(
-            "image is too dark to find the lens's image circle (90th percentile of the radial profile {bright:.1})"
-        )));
-    }
-    let is_lit = |v: &Option<f64>| v.is_some_and(|x| x >= thr);
-    let last_lit = profile.iter().rposition(is_lit).unwrap_or(0);
-    // The rim: the first radius from outside at which the profile is lit; if it stays lit to
-    // the image corners, the circle is larger than the sensor.
-    let outer =
-        if last_lit + 1 >= profile.len() || profile[last_lit + 1..].iter().all(|v| v.is_none()) {
-            max_r as f64
-        } else {
-            last_lit as f64 + 0.5
-        };
-    let first_lit = profile.iter().position(is_lit).unwrap_or(0);
-    let inner = if (first_lit as f64) > 0.03 * outer {
-        first_lit as f64 - 0.5
-    } else {
-        0.0
-    };
     let m = FovMask {
-        inner_radius_px: inner.max(0.0),
+        inner_radius_px: inner,
         outer_radius_px: outer,
     };
     m.validate().map_err(err)?;
@@ -263,8 +288,8 @@ mod tests {
         let m = find_fov(&v, centre).unwrap();
         assert!((m.inner_radius_px - 30.0).abs() < 1.5, "{m:?}");
         assert!((m.outer_radius_px - 95.0).abs() < 1.5, "{m:?}");
-        // circle larger than the sensor: whole image lit
-        let d = vec![120u8; (h * w) as usize];
+        // circle larger than the sensor: the scene reaches the corners
+        let d = ring_image(h, w, 0.0, 1000.0);
         let v = ImageView::new(w, h, PixelFormat::Mono8, &d).unwrap();
         let m = find_fov(&v, centre).unwrap();
         assert!(m.outer_radius_px >= 155.0, "{m:?}");

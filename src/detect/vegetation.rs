@@ -17,8 +17,11 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum VegetationIndex {
-    /// Excess green 2G − R − B, clamped at 0, halved: 0..=255.
+    /// Excess green, unless the colour image carries no colour (R = G = B, e.g. a greyscale
+    /// picture saved as RGB): then brightness.
     #[default]
+    Auto,
+    /// Excess green 2G − R − B, clamped at 0, halved: 0..=255.
     ExcessGreen,
     /// Brightness (R + 2G + B) / 4: for colour images whose plants are simply bright.
     Luma,
@@ -81,6 +84,20 @@ fn luma(r: i32, g2: i32, b: i32) -> u8 {
     ((r + g2 + b + 2) >> 2).min(255) as u8
 }
 
+/// Whether RGB bytes carry colour: the mean of |R − G| + |G − B| over about 4096 pixels
+/// spread through the image is at least 1.
+fn has_colour(rgb: &[u8]) -> bool {
+    let n = rgb.len() / 3;
+    let step = (n / 4096).max(1);
+    let (mut sum, mut count) = (0u64, 0u64);
+    for p in rgb.chunks_exact(3).step_by(step) {
+        sum += (p[0] as i32 - p[1] as i32).unsigned_abs() as u64
+            + (p[1] as i32 - p[2] as i32).unsigned_abs() as u64;
+        count += 1;
+    }
+    count > 0 && sum >= count
+}
+
 /// Computes the vegetation image of `view` into `out` (resized as needed, which allocates only
 /// when it grows). `bin2` asks for 2×2 binning of Mono8/Rgb8 input; Bayer input is always
 /// read by quads.
@@ -107,10 +124,16 @@ pub fn vegetation_image(
     let (ow, oh) = (w / factor, h / factor);
     out.resize(ow, oh);
     let d = view.data;
-    let index = opts.index;
+    let index = match opts.index {
+        VegetationIndex::Auto if view.format == PixelFormat::Rgb8 && !has_colour(d) => {
+            VegetationIndex::Luma
+        }
+        VegetationIndex::Auto => VegetationIndex::ExcessGreen,
+        other => other,
+    };
     let f = |r: i32, g2: i32, b: i32| match index {
-        VegetationIndex::ExcessGreen => exg(r, g2, b),
         VegetationIndex::Luma => luma(r, g2, b),
+        _ => exg(r, g2, b),
     };
     match (view.format, factor) {
         (PixelFormat::Mono8, 1) => out.data.copy_from_slice(d),
@@ -210,6 +233,20 @@ mod tests {
         let r = vegetation_image(&view, &VegetationOptions::default(), false, &mut out).unwrap();
         assert_eq!((r.factor, r.width, r.height), (1, 4, 1));
         assert_eq!(out.data, vec![165, 0, 0, 0]);
+    }
+
+    #[test]
+    fn grey_pictures_in_rgb_use_brightness() {
+        let data = [90u8, 90, 90, 200, 200, 200];
+        let view = ImageView::new(2, 1, PixelFormat::Rgb8, &data).unwrap();
+        let mut out = GreyImage::default();
+        vegetation_image(&view, &VegetationOptions::default(), false, &mut out).unwrap();
+        assert_eq!(out.data, vec![90, 200]);
+        let opts = VegetationOptions {
+            index: VegetationIndex::ExcessGreen,
+        };
+        vegetation_image(&view, &opts, false, &mut out).unwrap();
+        assert_eq!(out.data, vec![0, 0]);
     }
 
     #[test]
