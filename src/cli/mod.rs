@@ -5,6 +5,7 @@
 
 mod calib;
 pub mod detect;
+mod eval;
 mod synth;
 
 use clap::{Parser, Subcommand};
@@ -27,6 +28,8 @@ pub enum Command {
     Synth(Box<synth::SynthArgs>),
     /// Detect rows, their vanishing point, heading and tilt in images (one JSON line each).
     Detect(detect::DetectArgs),
+    /// Regenerate the paper's evaluation on synthetic images: tables and plots.
+    Eval(eval::EvalArgs),
 }
 
 /// Parses the process arguments and runs the command.
@@ -37,6 +40,7 @@ pub fn main() -> anyhow::Result<ExitCode> {
         Command::Calib(c) => calib::run(c),
         Command::Synth(a) => synth::run(*a),
         Command::Detect(a) => detect::run(a),
+        Command::Eval(a) => eval::run(a),
     }
 }
 
