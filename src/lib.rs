@@ -10,6 +10,7 @@ pub mod camera;
 pub mod cli;
 pub mod detect;
 pub mod estimate;
+pub mod eval;
 pub mod frame;
 pub mod notify;
 pub mod pipeline;
