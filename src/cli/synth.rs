@@ -17,9 +17,16 @@ pub struct SynthArgs {
     /// Calibration to render through (OCamCalib calib_results.txt or omnirow TOML).
     #[arg(long, conflicts_with = "lens")]
     calib: Option<PathBuf>,
-    /// Built-in ideal lens for the GC2450C's 2448x2050 sensor (when no --calib).
+    /// Built-in ideal lens (when no --calib), for the GC2450C's 2448x2050 sensor unless
+    /// --image-height/--image-width say otherwise.
     #[arg(long, value_enum)]
     lens: Option<LensArg>,
+    /// Image height of the built-in lens, pixels (the lens's image circle fits it).
+    #[arg(long, default_value_t = SENSOR.0, conflicts_with = "calib")]
+    image_height: u32,
+    /// Image width of the built-in lens, pixels.
+    #[arg(long, default_value_t = SENSOR.1, conflicts_with = "calib")]
+    image_width: u32,
     /// Seed of every random quantity (plant errors, weeds, noise, texture, --random).
     #[arg(long, default_value_t = 1)]
     seed: u64,
@@ -103,10 +110,11 @@ pub fn run(args: SynthArgs) -> anyhow::Result<ExitCode> {
         Some(path) => (Calibration::load(path)?, path.display().to_string()),
         None => {
             let lens = IdealLens::from(args.lens.unwrap_or(LensArg::Fisheye185));
-            (
-                lens.calibration(SENSOR.0, SENSOR.1),
-                lens.name().to_string(),
-            )
+            let (h, w) = (args.image_height, args.image_width);
+            if !(16..=20_000).contains(&h) || !(16..=20_000).contains(&w) {
+                bail!("--image-height {h} --image-width {w}: each must be 16..=20000 pixels");
+            }
+            (lens.calibration(h, w), lens.name().to_string())
         }
     };
     let cal = if args.scale != 1.0 {

@@ -168,6 +168,9 @@ impl WeedGrid {
 
     #[inline]
     fn candidates(&self, x: f64, y: f64) -> &[[f64; 2]] {
+        if self.items.is_empty() {
+            return &[];
+        }
         let fx = (x - self.origin[0]) / self.cell;
         let fy = (y - self.origin[1]) / self.cell;
         if !(fx >= 0.0 && fy >= 0.0 && fx < self.nx as f64 && fy < self.ny as f64) {

@@ -21,7 +21,7 @@ mod truth;
 
 pub use bayer::mosaic;
 pub use field::{Cover, Field, PlantShape};
-pub use noise::{gaussian_blur, salt_and_pepper};
+pub use noise::{salt_and_pepper, Blur};
 pub use options::{Style, SynthOptions};
 pub use pose::Pose;
 pub use protocol::{random_scene, Protocol};
