@@ -212,7 +212,12 @@ mod tests {
 
     #[test]
     fn plant_centres_lie_on_the_listed_great_circles_and_are_rendered_bright() {
-        let cal = ideal_fisheye(2050, 2448).rescaled(2.0).unwrap();
+        check_plants_on_rows(&ideal_fisheye(2050, 2448).rescaled(2.0).unwrap());
+        check_plants_on_rows(&crate::camera::ideal_pal(2050, 2448).rescaled(2.0).unwrap());
+    }
+
+    fn check_plants_on_rows(cal: &Calibration) {
+        let cal = cal.clone();
         let opts = SynthOptions {
             yaw_deg: 12.0,
             pitch_deg: -4.0,
@@ -256,7 +261,7 @@ mod tests {
         }
         assert!(checked > 200 && bright > 10, "{checked} {bright}");
         // and half-way between rows, near the camera, is soil
-        let mid = Vector3::new(0.3, opts.lateral_m + 0.0, 0.0);
+        let mid = Vector3::new(1.0, opts.lateral_m, 0.0);
         let px = cal
             .ray_to_pixel_in_fov(&sc.pose.direction_to(&mid).unwrap())
             .unwrap();
