@@ -233,20 +233,16 @@ impl Field {
             let n = ((row_max - row_min + 1) * (k_max - k_min + 1)) as usize;
             offsets.reserve_exact(n);
             let mut rng = Rng::stream(seed, 1);
-            let mut truncated = |sd: f64| -> f64 {
-                if sd == 0.0 {
-                    return 0.0;
-                }
-                loop {
-                    let z = rng.normal();
-                    if z.abs() <= TRUNCATE_SD {
-                        return z * sd;
-                    }
-                }
-            };
+            let (sx, sy) = (opts.along_sd_m, opts.across_sd_m);
             for _ in 0..n {
-                let ox = truncated(opts.along_sd_m) as f32;
-                let oy = truncated(opts.across_sd_m) as f32;
+                // A pair of standard normals, redrawn until both lie within the truncation.
+                let (zx, zy) = loop {
+                    let (a, b) = rng.normal_pair();
+                    if a.abs() <= TRUNCATE_SD && b.abs() <= TRUNCATE_SD {
+                        break (a, b);
+                    }
+                };
+                let (ox, oy) = ((zx * sx) as f32, (zy * sy) as f32);
                 max_x = max_x.max((ox as f64).abs());
                 max_y = max_y.max((oy as f64).abs());
                 offsets.push([ox, oy]);
