@@ -166,11 +166,11 @@ pub fn run(args: SynthArgs) -> anyhow::Result<ExitCode> {
         };
     }
 
-    let cpu0 = process_cpu_s();
     let t0 = Instant::now();
     let scene = Scene::new(&opts, args.seed, &cal.mounting)?;
     let mut renderer = Renderer::new(&cal)?;
     let t1 = Instant::now();
+    let cpu0 = process_cpu_s();
     let mut data = vec![0u8; renderer.buffer_len(opts.style)];
     renderer.render_into(&scene, &mut data)?;
     let t2 = Instant::now();
@@ -200,7 +200,7 @@ pub fn run(args: SynthArgs) -> anyhow::Result<ExitCode> {
         (t1 - t0).as_secs_f64() * 1e3,
         (t2 - t1).as_secs_f64() * 1e3,
         cpu_render
-            .map(|c| format!(" (setup + render {:.0} ms CPU)", c * 1e3))
+            .map(|c| format!(" ({:.0} ms CPU)", c * 1e3))
             .unwrap_or_default(),
         args.out.display()
     );
