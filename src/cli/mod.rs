@@ -5,6 +5,7 @@
 
 mod calib;
 pub mod detect;
+mod synth;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -24,6 +25,8 @@ pub enum Command {
     Calib(calib::CalibCommand),
     /// Detect rows, their vanishing point, heading and tilt in images (one JSON line each).
     Detect(detect::DetectArgs),
+    /// Render a synthetic field image with its ground truth.
+    Synth(Box<synth::SynthArgs>),
 }
 
 /// Parses the process arguments and runs the command.
@@ -33,6 +36,7 @@ pub fn main() -> anyhow::Result<ExitCode> {
     match cli.command {
         Command::Calib(c) => calib::run(c),
         Command::Detect(a) => detect::run(a),
+        Command::Synth(a) => synth::run(*a),
     }
 }
 
