@@ -69,7 +69,7 @@ fn bench(c: &mut Criterion) {
             })
         });
         let work = cal.rescaled(2.0).unwrap();
-        let (mut mask, mut rays) = (Vec::new(), Vec::new());
+        let (mut mask, mut rays, mut solid) = (Vec::new(), Vec::new(), Vec::new());
         build_mask(
             &work,
             &opts.mask,
@@ -77,6 +77,7 @@ fn bench(c: &mut Criterion) {
             None,
             &mut mask,
             &mut rays,
+            &mut solid,
         )
         .unwrap();
         let mut kept = Vec::new();
@@ -98,6 +99,11 @@ fn bench(c: &mut Criterion) {
                     .find_rows(&points.rays, &points.weights, &mut rows)
                     .unwrap()
             })
+        });
+        let bands = hough.bands().to_vec();
+        let mut rows2 = rows.clone();
+        g.bench_function("refit", |b| {
+            b.iter(|| prep.refit(&mut rows2, &bands, None).unwrap())
         });
         let mut vs = omnirow::detect::VanishingStage::new(&cal, &opts).unwrap();
         let mut d2 = Detection {
@@ -122,7 +128,7 @@ fn bench(c: &mut Criterion) {
         det.process(&view, &mut out).unwrap();
         let one = t0.elapsed();
         println!(
-            "{name} 2448x2050 breakdown (median ms): prepare {:.2}, hough {:.2}, vanishing {:.3}, total {:.2} (one more frame {:.2} ms); {} points, {} rows, VP {}",
+            "{name} 2448x2050 breakdown (median ms): prepare {:.2}, hough + refit {:.2}, vanishing {:.3}, total {:.2} (one more frame {:.2} ms); {} points, {} rows, VP {}",
             med(&|t| t.prepare),
             med(&|t| t.hough),
             med(&|t| t.vanishing),

@@ -53,7 +53,11 @@ fn summarise(outs: &[Outcome]) -> Summary {
         mean_mrad: mean * 1e3,
         max_mrad: errs.iter().copied().fold(0.0, f64::max) * 1e3,
         var_1e8: var * 1e8,
-        max_heading_mrad: outs.iter().filter_map(|o| o.heading_err).fold(0.0, f64::max) * 1e3,
+        max_heading_mrad: outs
+            .iter()
+            .filter_map(|o| o.heading_err)
+            .fold(0.0, f64::max)
+            * 1e3,
         max_tilt_mrad: outs.iter().filter_map(|o| o.tilt_err).fold(0.0, f64::max) * 1e3,
     }
 }

@@ -39,6 +39,8 @@ pub struct ThresholdResult {
     pub kept: usize,
     /// Number of valid (unmasked) pixels above `min_level`.
     pub candidates: usize,
+    /// Median value of the valid pixels (the background, in a field image).
+    pub median: u8,
 }
 
 /// Chooses the level from the histogram of `image` over pixels whose `mask` byte is non-zero,
@@ -71,6 +73,22 @@ pub fn keep_brightest(
     for (&v, &m) in image.iter().zip(mask) {
         hist[(v & m) as usize] += 1;
     }
+    let valid: u64 = mask.iter().filter(|&&m| m != 0).count() as u64;
+    // Median of the valid pixels: masked pixels sit in bin 0 with the valid zeros.
+    let median = {
+        let masked = image.len() as u64 - valid;
+        let mut acc = 0u64;
+        let half = masked + valid / 2;
+        let mut m = 0u8;
+        for (v, &c) in hist.iter().enumerate() {
+            acc += c as u64;
+            if acc > half {
+                m = v as u8;
+                break;
+            }
+        }
+        m
+    };
     let n = opts.target_points as u64;
     let mut above: u64 = 0; // pixels with value > level
     let mut level = 255usize;
@@ -115,6 +133,7 @@ pub fn keep_brightest(
         stride,
         kept: out.len(),
         candidates: candidates as usize,
+        median,
     })
 }
 
@@ -137,6 +156,7 @@ mod tests {
         assert_eq!(r.kept, 10);
         assert_eq!(out, (245..255).collect::<Vec<u32>>());
         assert_eq!(r.level, 245);
+        assert_eq!(r.median, 127);
     }
 
     #[test]
