@@ -18,7 +18,7 @@ pub struct SmoothOptions {
 
 impl Default for SmoothOptions {
     fn default() -> Self {
-        SmoothOptions { sigma_px: 1.0 }
+        SmoothOptions { sigma_px: 0.8 }
     }
 }
 
@@ -44,7 +44,7 @@ impl Gaussian {
                 radius: 0,
             });
         }
-        let radius = (3.0 * s).ceil() as usize;
+        let radius = (2.5 * s).ceil() as usize;
         let raw: Vec<f64> = (0..=2 * radius)
             .map(|i| {
                 let x = i as f64 - radius as f64;
@@ -167,7 +167,7 @@ mod tests {
 
     #[test]
     fn impulse_spreads_symmetrically_and_keeps_mass() {
-        let g = Gaussian::new(&SmoothOptions { sigma_px: 1.0 }).unwrap();
+        let g = Gaussian::new(&SmoothOptions { sigma_px: 0.8 }).unwrap();
         let (w, h) = (15, 15);
         let mut src = vec![0u8; w * h];
         src[7 * w + 7] = 255;
