@@ -120,7 +120,7 @@ pub struct Preparer {
     setup: Option<Setup>,
     veg: GreyImage,
     smoothed: GreyImage,
-    tmp: Vec<u16>,
+    tmp: Vec<u8>,
     kept: Vec<u32>,
     last_threshold: ThresholdResult,
 }

@@ -139,6 +139,8 @@ pub struct HoughRows {
     owned: Vec<bool>,
     /// Band half-widths (radians) of the rows appended by the last run, in their order.
     bands: Vec<f64>,
+    /// Non-maximum-suppression window offsets, nearest first (most cells lose to a neighbour).
+    nms: Vec<(isize, isize)>,
 }
 
 /// atan2 for f32 with an error below 1e-5 rad (enough to pick a 2° cell), branch-light.
@@ -188,6 +190,15 @@ impl HoughRows {
             found: Vec::with_capacity(4 * opts.max_rows),
             owned: Vec::new(),
             bands: Vec::with_capacity(opts.max_rows),
+            nms: {
+                let r = opts.nms_radius as isize;
+                let mut v: Vec<(isize, isize)> = (-r..=r)
+                    .flat_map(|a| (-r..=r).map(move |b| (a, b)))
+                    .filter(|&o| o != (0, 0))
+                    .collect();
+                v.sort_by_key(|&(a, b)| a * a + b * b);
+                v
+            },
         })
     }
 
@@ -280,7 +291,6 @@ impl HoughRows {
         let floor = (self.opts.min_support.max(1))
             .max((self.opts.min_peak_fraction * max as f64).ceil() as u32);
         self.peaks.clear();
-        let r = self.opts.nms_radius as isize;
         for k in 0..t {
             for j in 0..p {
                 let idx = k * p + j;
@@ -289,17 +299,12 @@ impl HoughRows {
                     continue;
                 }
                 let mut is_peak = true;
-                'nb: for dk in -r..=r {
-                    for dj in -r..=r {
-                        if dk == 0 && dj == 0 {
-                            continue;
-                        }
-                        let n = self.neighbour(k, j, dk, dj);
-                        let w = self.acc[n];
-                        if w > v || (w == v && n < idx) {
-                            is_peak = false;
-                            break 'nb;
-                        }
+                for &(dk, dj) in &self.nms {
+                    let n = self.neighbour(k, j, dk, dj);
+                    let w = self.acc[n];
+                    if w > v || (w == v && n < idx) {
+                        is_peak = false;
+                        break;
                     }
                 }
                 if is_peak {

@@ -33,7 +33,7 @@ impl Default for RefitOptions {
     fn default() -> Self {
         RefitOptions {
             enabled: true,
-            iterations: 3,
+            iterations: 2,
             background_fraction: 0.25,
             margin_px: 1.5,
             perspective: false,

@@ -68,12 +68,25 @@ pub fn keep_brightest(
         return Err(DetectError::Buffer("threshold: image too large".into()));
     }
     out.clear();
-    let mut hist = [0u32; 256];
-    // Masked pixels land in bin 0 (mask bytes are 0 or 0xFF).
-    for (&v, &m) in image.iter().zip(mask) {
-        hist[(v & m) as usize] += 1;
+    // Masked pixels land in bin 0 (mask bytes are 0 or 0xFF). Four histograms interleaved
+    // so that runs of equal values do not serialise on one counter.
+    let mut hists = [[0u32; 256]; 4];
+    let mut chunks = image.chunks_exact(4).zip(mask.chunks_exact(4));
+    for (v, m) in &mut chunks {
+        hists[0][(v[0] & m[0]) as usize] += 1;
+        hists[1][(v[1] & m[1]) as usize] += 1;
+        hists[2][(v[2] & m[2]) as usize] += 1;
+        hists[3][(v[3] & m[3]) as usize] += 1;
     }
-    let valid: u64 = mask.iter().filter(|&&m| m != 0).count() as u64;
+    let tail = image.len() / 4 * 4;
+    for (&v, &m) in image[tail..].iter().zip(&mask[tail..]) {
+        hists[0][(v & m) as usize] += 1;
+    }
+    let mut hist = [0u32; 256];
+    for (i, h) in hist.iter_mut().enumerate() {
+        *h = hists[0][i] + hists[1][i] + hists[2][i] + hists[3][i];
+    }
+    let valid: u64 = mask.iter().map(|&m| (m & 1) as u64).sum();
     // Median of the valid pixels: masked pixels sit in bin 0 with the valid zeros.
     let median = {
         let masked = image.len() as u64 - valid;
@@ -117,15 +130,24 @@ pub fn keep_brightest(
     };
     let level_u8 = level.min(255) as u8;
     let mut count_at = 0u32;
-    for (i, (&v, &m)) in image.iter().zip(mask).enumerate() {
-        let v = v & m;
-        if v > level_u8 {
-            out.push(i as u32);
-        } else if v == level_u8 && level_u8 as usize >= lo {
-            if count_at % stride == 0 {
+    // Scan in blocks, skipping (with a vectorised maximum) blocks with nothing to keep.
+    const BLOCK: usize = 64;
+    for (b, (vb, mb)) in image.chunks(BLOCK).zip(mask.chunks(BLOCK)).enumerate() {
+        let max = vb.iter().zip(mb).fold(0u8, |a, (&v, &m)| a.max(v & m));
+        if max < level_u8 {
+            continue;
+        }
+        for (k, (&v, &m)) in vb.iter().zip(mb).enumerate() {
+            let v = v & m;
+            let i = b * BLOCK + k;
+            if v > level_u8 {
                 out.push(i as u32);
+            } else if v == level_u8 && level_u8 as usize >= lo {
+                if count_at % stride == 0 {
+                    out.push(i as u32);
+                }
+                count_at += 1;
             }
-            count_at += 1;
         }
     }
     Ok(ThresholdResult {
