@@ -56,7 +56,7 @@ impl Default for HoughOptions {
             min_support: 40,
             min_peak_fraction: 0.1,
             nms_radius: 2,
-            refine_iterations: 12,
+            refine_iterations: 6,
             min_tolerance_deg: 0.15,
             merge_angle_deg: 1.0,
             max_degeneracy: 0.2,
@@ -314,7 +314,7 @@ impl HoughRows {
         }
         self.peaks
             .sort_unstable_by(|a, b| b.0.cmp(&a.0).then(a.1.cmp(&b.1)));
-        self.peaks.truncate(3 * self.opts.max_rows);
+        self.peaks.truncate(2 * self.opts.max_rows);
         max
     }
 
@@ -361,7 +361,7 @@ impl HoughRows {
             fit = Some(f);
             let rms = f.mean_sq_residual.max(0.0).sqrt().asin();
             let next = (3.0 * rms).clamp(min_tol, tol);
-            if change < 1e-10 && (next - tol).abs() < 1e-12 {
+            if change < 1e-7 && (next - tol).abs() < 1e-9 {
                 break;
             }
             tol = next;
