@@ -11,11 +11,12 @@
 use super::hough::{HoughOptions, HoughResult, HoughRows};
 use super::mask::{build_mask, find_fov, MaskOptions, MaskResult};
 use super::pose::heading_tilt;
+use super::refit::{refit_rows, RefitImage, RefitOptions, Tiles};
 use super::smooth::{Gaussian, SmoothOptions};
 use super::threshold::{keep_brightest, ThresholdOptions, ThresholdResult};
 use super::vanishing::{VanishingFinder, VanishingOptions, VanishingResult};
 use super::vegetation::{vegetation_image, working_factor, VegetationOptions};
-use super::{DetectError, Detection, GreyImage, Method};
+use super::{DetectError, Detection, GreyImage, Method, Row};
 use crate::camera::{Calibration, FovMask};
 use crate::frame::{ImageView, PixelFormat};
 use nalgebra::Vector3;
@@ -48,6 +49,7 @@ pub struct DetectorOptions {
     pub smooth: SmoothOptions,
     pub threshold: ThresholdOptions,
     pub hough: HoughOptions,
+    pub refit: RefitOptions,
     pub vanishing: VanishingOptions,
 }
 
@@ -63,13 +65,15 @@ impl Default for DetectorOptions {
             smooth: SmoothOptions::default(),
             threshold: ThresholdOptions::default(),
             hough: HoughOptions::default(),
+            refit: RefitOptions::default(),
             vanishing: VanishingOptions::default(),
         }
     }
 }
 
 /// The kept points handed from [`Preparer`] to [`HoughRows`]: unit rays (camera frame) and
-/// their weights (smoothed vegetation value).
+/// their weights (smoothed vegetation value times the pixel's solid angle, so that fits are
+/// integrals over the sphere, free of the lens's varying pixel density).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Points {
     pub rays: Vec<[f32; 3]>,
@@ -98,6 +102,9 @@ struct Setup {
     work_cal: Calibration,
     mask: Vec<u8>,
     rays: Vec<[f32; 3]>,
+    solid: Vec<f32>,
+    tiles: Tiles,
+    pixel_angle: f64,
     mask_result: MaskResult,
 }
 
@@ -113,13 +120,15 @@ pub struct Preparer {
     setup: Option<Setup>,
     veg: GreyImage,
     smoothed: GreyImage,
-    tmp: Vec<u16>,
+    tmp: Vec<u8>,
     kept: Vec<u32>,
+    last_threshold: ThresholdResult,
 }
 
 impl Preparer {
     pub fn new(cal: &Calibration, opts: &DetectorOptions) -> Result<Self, DetectError> {
         opts.mask.validate()?;
+        opts.refit.validate()?;
         if !(opts.max_tilt_deg > 0.0 && opts.max_tilt_deg <= 80.0) {
             return Err(DetectError::Options(format!(
                 "max_tilt_deg = {} must be within (0, 80]",
@@ -140,6 +149,7 @@ impl Preparer {
             smoothed: GreyImage::default(),
             tmp: Vec::new(),
             kept: Vec::new(),
+            last_threshold: ThresholdResult::default(),
         })
     }
 
@@ -247,6 +257,7 @@ impl Preparer {
         };
         let mut mask = Vec::new();
         let mut rays = Vec::new();
+        let mut solid = Vec::new();
         let mask_result = build_mask(
             &work_cal,
             &self.opts.mask,
@@ -254,8 +265,19 @@ impl Preparer {
             self.user_mask.as_ref(),
             &mut mask,
             &mut rays,
+            &mut solid,
         )?;
         let n = mask.len();
+        let (ww, wh) = (
+            work_cal.model.width as usize,
+            work_cal.model.height as usize,
+        );
+        let tiles = Tiles::new(&mask, &rays, ww, wh, 16);
+        let m = &work_cal.model;
+        let pixel_angle = crate::sphere::axis_angle(
+            &m.cam2world(m.xc, m.yc + 0.5),
+            &m.cam2world(m.xc, m.yc - 0.5),
+        );
         self.veg.resize(
             work_cal.model.width as usize,
             work_cal.model.height as usize,
@@ -283,6 +305,9 @@ impl Preparer {
             work_cal,
             mask,
             rays,
+            solid,
+            tiles,
+            pixel_angle,
             mask_result,
         });
         Ok(true)
@@ -306,17 +331,60 @@ impl Preparer {
             &self.opts.threshold,
             &mut self.kept,
         )?;
+        self.last_threshold = thr;
         points.rays.clear();
         points.weights.clear();
         for &i in &self.kept {
             points.rays.push(s.rays[i as usize]);
-            points.weights.push(self.smoothed.data[i as usize] as f32);
+            let i = i as usize;
+            points
+                .weights
+                .push(self.smoothed.data[i] as f32 * s.solid[i]);
         }
         Ok(PrepareResult {
             threshold: thr,
             working_factor: s.factor,
             setup_rebuilt: rebuilt,
         })
+    }
+}
+
+impl Preparer {
+    /// Refits rows (with the Hough bands they were fitted in) on every pixel of the last
+    /// image near them, weighted by intensity above the background (see [`super::refit`]).
+    /// Returns the number of rows refitted.
+    /// With the rows' vanishing point `vp`, also removes each row's perspective bias.
+    pub fn refit(
+        &self,
+        rows: &mut [Row],
+        bands: &[f64],
+        vp: Option<&Vector3<f64>>,
+    ) -> Result<usize, DetectError> {
+        let Some(s) = &self.setup else {
+            return Ok(0);
+        };
+        if !self.opts.refit.enabled {
+            return Ok(0);
+        }
+        let t = &self.last_threshold;
+        let bg = t.median as f64
+            + self.opts.refit.background_fraction * (t.level as f64 - t.median as f64).max(0.0);
+        let img = RefitImage {
+            values: &self.smoothed.data,
+            mask: &s.mask,
+            rays: &s.rays,
+            solid: &s.solid,
+            tiles: &s.tiles,
+            pixel_angle: s.pixel_angle,
+        };
+        refit_rows(
+            &img,
+            bg.round().clamp(0.0, 254.0) as u8,
+            rows,
+            bands,
+            vp,
+            &self.opts.refit,
+        )
     }
 }
 
@@ -379,8 +447,11 @@ impl VanishingStage {
 /// Time spent in each stage of the last image.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct StageTimes {
+    /// Vegetation, smoothing, threshold.
     pub prepare: Duration,
+    /// Hough rows and their refit on the image.
     pub hough: Duration,
+    /// Vanishing point, heading and tilt (and the optional perspective refit).
     pub vanishing: Duration,
 }
 
@@ -438,8 +509,16 @@ impl Detector {
         self.last_hough =
             self.hough
                 .find_rows(&self.points.rays, &self.points.weights, &mut out.rows)?;
+        self.prep.refit(&mut out.rows, self.hough.bands(), None)?;
         let t2 = Instant::now();
         self.vanish.run(None, out)?;
+        if self.opts.refit.perspective {
+            if let Some(vp) = out.vanishing_point {
+                self.prep
+                    .refit(&mut out.rows, self.hough.bands(), Some(&vp.direction))?;
+                self.vanish.run(None, out)?;
+            }
+        }
         let t3 = Instant::now();
         self.times = StageTimes {
             prepare: t1 - t0,

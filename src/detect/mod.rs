@@ -9,6 +9,7 @@ pub mod hough;
 pub mod mask;
 pub mod overlay;
 pub mod pose;
+pub mod refit;
 pub mod smooth;
 pub mod threshold;
 pub mod vanishing;
