@@ -3,6 +3,8 @@
 //! Owns the result types every stage shares ([`Row`], [`VanishingPoint`], [`Detection`]).
 //! The stages (mask, vegetation, Hough, edge, vanishing point, pose) live in their own files.
 
+pub mod edge;
+
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 

@@ -1,0 +1,586 @@
+//! Canny edge detection on an 8-bit image (the vegetation or greyscale image), then the mask.
+//!
+//! Gaussian smoothing (fixed-point, separable; skipped when the input is already smoothed),
+//! Sobel gradients, non-maximum suppression along the quantised gradient direction, and
+//! hysteresis between a low and a high threshold, given either as absolute gradient magnitudes
+//! or as quantiles of the gradient magnitudes inside the mask. Only pixels inside the mask can
+//! be edges. [`Canny`] owns every buffer; once warmed up on an image size, `process` does not
+//! allocate.
+
+use super::EdgeError;
+use serde::{Deserialize, Serialize};
+
+/// How the hysteresis thresholds are given.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ThresholdMode {
+    /// `low` and `high` are Sobel gradient magnitudes (0..≈1443 for 8-bit input).
+    Absolute,
+    /// `high` is the quantile (0..1) of gradient magnitudes over the masked pixels that is
+    /// the high threshold; `low` is the low threshold as a fraction (0..1) of the high one.
+    Quantile,
+}
+
+/// Options of the Canny stage.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CannyOptions {
+    /// Standard deviation (pixels) of the Gaussian smoothing; 0 when the input is already
+    /// smoothed. Default 1.4.
+    pub sigma: f64,
+    /// How `low` and `high` are read. Default `quantile`.
+    pub mode: ThresholdMode,
+    /// Low threshold (see [`ThresholdMode`]). Default 0.5 (half the high threshold).
+    pub low: f64,
+    /// High threshold (see [`ThresholdMode`]). Default 0.9 (the 90th percentile).
+    pub high: f64,
+    /// In quantile mode, the high threshold never falls below this magnitude, so that a
+    /// flat image gives no edges. Default 40.
+    pub min_high: f64,
+}
+
+impl Default for CannyOptions {
+    fn default() -> Self {
+        CannyOptions {
+            sigma: 1.4,
+            mode: ThresholdMode::Quantile,
+            low: 0.5,
+            high: 0.9,
+            min_high: 40.0,
+        }
+    }
+}
+
+impl CannyOptions {
+    /// Checks that the numbers make sense.
+    pub fn validate(&self) -> Result<(), EdgeError> {
+        let bad = |m: String| Err(EdgeError::Options(format!("canny: {m}")));
+        if !(self.sigma >= 0.0 && self.sigma <= 10.0) {
+            return bad(format!("sigma = {} must be in 0..=10", self.sigma));
+        }
+        match self.mode {
+            ThresholdMode::Absolute => {
+                if !(self.low >= 0.0 && self.high >= self.low && self.high.is_finite()) {
+                    return bad(format!(
+                        "absolute thresholds need 0 <= low <= high, got low {} high {}",
+                        self.low, self.high
+                    ));
+                }
+            }
+            ThresholdMode::Quantile => {
+                if !(self.high > 0.0 && self.high < 1.0) {
+                    return bad(format!("quantile high = {} must be in (0, 1)", self.high));
+                }
+                if !(self.low > 0.0 && self.low <= 1.0) {
+                    return bad(format!("quantile low = {} must be in (0, 1]", self.low));
+                }
+                if !(self.min_high >= 0.0 && self.min_high.is_finite()) {
+                    return bad(format!("min_high = {} must be >= 0", self.min_high));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// What one Canny run did.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct CannyResult {
+    /// Low and high thresholds used (gradient magnitudes).
+    pub low: u16,
+    pub high: u16,
+    /// Number of edge pixels written.
+    pub edge_pixels: usize,
+}
+
+/// Magnitudes are stored in the low 14 bits, the quantised gradient direction in the top two.
+const MAG_MASK: u16 = 0x3fff;
+/// Largest Sobel L2 magnitude of 8-bit input: √2 · 4 · 255.
+const MAX_MAG: usize = 1443;
+/// Value of a weak (not yet connected) candidate in the edge buffer during hysteresis.
+const WEAK: u8 = 1;
+/// Value of an edge pixel in the output.
+pub const EDGE: u8 = 255;
+
+/// Canny edge detector owning its buffers (sized on first use, reused after).
+#[derive(Debug, Clone)]
+pub struct Canny {
+    options: CannyOptions,
+    kernel: Vec<u32>,
+    smooth: Vec<u8>,
+    tmp: Vec<u16>,
+    acc: Vec<u32>,
+    /// Gradient magnitude (low 14 bits) and direction sector (top 2 bits).
+    grad: Vec<u16>,
+    hist: Vec<u32>,
+    stack: Vec<u32>,
+}
+
+/// Fixed-point scale of the Gaussian weights (they sum to 256).
+const KSHIFT: u32 = 8;
+
+impl Canny {
+    /// A detector with the given options (checked).
+    pub fn new(options: CannyOptions) -> Result<Self, EdgeError> {
+        options.validate()?;
+        let kernel = gaussian_kernel(options.sigma);
+        Ok(Canny {
+            options,
+            kernel,
+            smooth: Vec::new(),
+            tmp: Vec::new(),
+            acc: Vec::new(),
+            grad: Vec::new(),
+            hist: vec![0; MAX_MAG + 1],
+            stack: Vec::new(),
+        })
+    }
+
+    pub fn options(&self) -> &CannyOptions {
+        &self.options
+    }
+
+    /// Sizes the buffers for a `width`×`height` image (done by `process` too).
+    pub fn warm_up(&mut self, width: usize, height: usize) {
+        let n = width * height;
+        if self.options.sigma > 0.0 {
+            self.smooth.resize(n, 0);
+            self.tmp.resize(n, 0);
+            self.acc.resize(width, 0);
+        }
+        self.grad.resize(n, 0);
+        if self.stack.capacity() < n / 16 {
+            self.stack.reserve(n / 16);
+        }
+    }
+
+    /// Runs Canny on `input` (`width`×`height`, row-major, one byte per pixel). Pixels where
+    /// `mask` is zero are never edges. `edges` receives [`EDGE`] at edge pixels, 0 elsewhere.
+    pub fn process(
+        &mut self,
+        input: &[u8],
+        width: usize,
+        height: usize,
+        mask: &[u8],
+        edges: &mut [u8],
+    ) -> Result<CannyResult, EdgeError> {
+        let n = width * height;
+        for (what, len) in [
+            ("input", input.len()),
+            ("mask", mask.len()),
+            ("edges", edges.len()),
+        ] {
+            if len != n {
+                return Err(EdgeError::Size {
+                    what,
+                    width,
+                    height,
+                    expected: n,
+                    actual: len,
+                });
+            }
+        }
+        edges.fill(0);
+        if width < 3 || height < 3 {
+            return Ok(CannyResult::default());
+        }
+        self.warm_up(width, height);
+        let src: &[u8] = if self.options.sigma > 0.0 {
+            gaussian(
+                input,
+                width,
+                height,
+                &self.kernel,
+                &mut self.tmp,
+                &mut self.acc,
+                &mut self.smooth,
+            );
+            &self.smooth
+        } else {
+            input
+        };
+        sobel(src, width, height, &mut self.grad);
+        let (low, high) = self.thresholds(width, height, mask);
+        let edge_pixels = nms_hysteresis(
+            &self.grad,
+            width,
+            height,
+            mask,
+            low,
+            high,
+            edges,
+            &mut self.stack,
+        );
+        Ok(CannyResult {
+            low,
+            high,
+            edge_pixels,
+        })
+    }
+
+    /// The smoothed image of the last run (empty when `sigma` is 0).
+    pub fn smoothed(&self) -> &[u8] {
+        &self.smooth
+    }
+
+    fn thresholds(&mut self, width: usize, height: usize, mask: &[u8]) -> (u16, u16) {
+        let o = &self.options;
+        match o.mode {
+            ThresholdMode::Absolute => {
+                let low = o.low.round().clamp(1.0, MAX_MAG as f64) as u16;
+                let high = o.high.round().clamp(1.0, MAX_MAG as f64) as u16;
+                (low, high.max(low))
+            }
+            ThresholdMode::Quantile => {
+                // Histogram over every second row of the masked interior: plenty for a
+                // quantile, half the cost.
+                self.hist.fill(0);
+                let mut total = 0u64;
+                for r in (1..height - 1).step_by(2) {
+                    let g = &self.grad[r * width..(r + 1) * width];
+                    let m = &mask[r * width..(r + 1) * width];
+                    for (&gv, &mv) in g.iter().zip(m) {
+                        if mv != 0 {
+                            self.hist[(gv & MAG_MASK) as usize] += 1;
+                            total += 1;
+                        }
+                    }
+                }
+                if total == 0 {
+                    return (u16::MAX, u16::MAX);
+                }
+                let target = (o.high * total as f64).ceil() as u64;
+                let mut seen = 0u64;
+                let mut q = MAX_MAG;
+                for (v, &c) in self.hist.iter().enumerate() {
+                    seen += c as u64;
+                    if seen >= target {
+                        q = v;
+                        break;
+                    }
+                }
+                let high = (q as f64).max(o.min_high).max(1.0);
+                let low = (high * o.low).round().max(1.0);
+                (low as u16, high.round() as u16)
+            }
+        }
+    }
+}
+
+/// Gaussian weights in fixed point summing to 2^KSHIFT, radius ⌈3σ⌉ (at most 30).
+fn gaussian_kernel(sigma: f64) -> Vec<u32> {
+    if sigma <= 0.0 {
+        return vec![1 << KSHIFT];
+    }
+    let radius = ((3.0 * sigma).ceil() as usize).clamp(1, 30);
+    let w: Vec<f64> = (0..=2 * radius)
+        .map(|i| {
+            let x = i as f64 - radius as f64;
+            (-x * x / (2.0 * sigma * sigma)).exp()
+        })
+        .collect();
+    let sum: f64 = w.iter().sum();
+    let scale = (1u32 << KSHIFT) as f64;
+    let mut k: Vec<u32> = w.iter().map(|v| (v / sum * scale).round() as u32).collect();
+    // Put the rounding error on the centre tap so the weights sum exactly to 2^KSHIFT.
+    let s: u32 = k.iter().sum();
+    let centre = radius;
+    k[centre] = (k[centre] as i64 + (1i64 << KSHIFT) - s as i64).max(0) as u32;
+    k
+}
+
+/// Separable Gaussian with replicated borders: horizontal pass into `tmp` (u16, scale 2^8),
+/// vertical pass into `out` (u8, rounded).
+fn gaussian(
+    input: &[u8],
+    width: usize,
+    height: usize,
+    kernel: &[u32],
+    tmp: &mut [u16],
+    acc: &mut [u32],
+    out: &mut [u8],
+) {
+    let radius = kernel.len() / 2;
+    // Horizontal.
+    for r in 0..height {
+        let src = &input[r * width..(r + 1) * width];
+        let dst = &mut tmp[r * width..(r + 1) * width];
+        if width > 2 * radius {
+            let inner = width - 2 * radius;
+            let acc = &mut acc[..inner];
+            acc.fill(0);
+            for (k, &wk) in kernel.iter().enumerate() {
+                let s = &src[k..k + inner];
+                for (a, &v) in acc.iter_mut().zip(s) {
+                    *a += wk * v as u32;
+                }
+            }
+            for (d, &a) in dst[radius..radius + inner].iter_mut().zip(acc.iter()) {
+                *d = a as u16;
+            }
+        }
+        let edge_cols =
+            (0..radius.min(width)).chain(width.saturating_sub(radius).max(radius)..width);
+        for c in edge_cols {
+            let mut a = 0u32;
+            for (k, &wk) in kernel.iter().enumerate() {
+                let cc = (c as isize + k as isize - radius as isize).clamp(0, width as isize - 1);
+                a += wk * src[cc as usize] as u32;
+            }
+            dst[c] = a as u16;
+        }
+    }
+    // Vertical.
+    let round = 1u32 << (2 * KSHIFT - 1);
+    let acc = &mut acc[..width];
+    for r in 0..height {
+        acc.fill(round);
+        for (k, &wk) in kernel.iter().enumerate() {
+            let rr =
+                (r as isize + k as isize - radius as isize).clamp(0, height as isize - 1) as usize;
+            let s = &tmp[rr * width..(rr + 1) * width];
+            for (a, &v) in acc.iter_mut().zip(s) {
+                *a += wk * v as u32;
+            }
+        }
+        let dst = &mut out[r * width..(r + 1) * width];
+        for (d, &a) in dst.iter_mut().zip(acc.iter()) {
+            *d = (a >> (2 * KSHIFT)) as u8;
+        }
+    }
+}
+
+/// Sobel gradients: L2 magnitude in the low 14 bits and the direction sector in the top two
+/// (0: across columns, 1: across rows, 2: the anti-diagonal, 3: the diagonal). The border
+/// is zero.
+fn sobel(src: &[u8], width: usize, height: usize, grad: &mut [u16]) {
+    grad[..width].fill(0);
+    grad[(height - 1) * width..].fill(0);
+    let inner = width - 2;
+    for r in 1..height - 1 {
+        let a = &src[(r - 1) * width..r * width];
+        let b = &src[r * width..(r + 1) * width];
+        let c = &src[(r + 1) * width..(r + 2) * width];
+        let out = &mut grad[r * width..(r + 1) * width];
+        out[0] = 0;
+        out[width - 1] = 0;
+        let (a0, a1, a2) = (&a[..inner], &a[1..inner + 1], &a[2..inner + 2]);
+        let (b0, b2) = (&b[..inner], &b[2..inner + 2]);
+        let (c0, c1, c2) = (&c[..inner], &c[1..inner + 1], &c[2..inner + 2]);
+        let o = &mut out[1..inner + 1];
+        for i in 0..inner {
+            let gx = (a2[i] as i32 + 2 * b2[i] as i32 + c2[i] as i32)
+                - (a0[i] as i32 + 2 * b0[i] as i32 + c0[i] as i32);
+            let gy = (c0[i] as i32 + 2 * c1[i] as i32 + c2[i] as i32)
+                - (a0[i] as i32 + 2 * a1[i] as i32 + a2[i] as i32);
+            let mag = ((gx * gx + gy * gy) as f32).sqrt() as u16;
+            let ax = gx.abs();
+            let ay = gy.abs();
+            // tan 22.5° and tan 67.5° in 15-bit fixed point, as OpenCV does.
+            let tg22 = ax * 13573;
+            let tg67 = tg22 + (ax << 16);
+            let ay15 = ay << 15;
+            let sector: u16 = if ay15 < tg22 {
+                0
+            } else if ay15 > tg67 {
+                1
+            } else if (gx ^ gy) < 0 {
+                2
+            } else {
+                3
+            };
+            o[i] = mag | (sector << 14);
+        }
+    }
+}
+
+/// Non-maximum suppression inside the mask, then hysteresis. Returns the number of edges.
+#[allow(clippy::too_many_arguments)]
+fn nms_hysteresis(
+    grad: &[u16],
+    width: usize,
+    height: usize,
+    mask: &[u8],
+    low: u16,
+    high: u16,
+    edges: &mut [u8],
+    stack: &mut Vec<u32>,
+) -> usize {
+    stack.clear();
+    let w = width as isize;
+    // Neighbour offsets per sector: the two pixels along the gradient.
+    let offs: [isize; 4] = [1, w, w - 1, w + 1];
+    for r in 1..height - 1 {
+        let row = r * width;
+        for c in 1..width - 1 {
+            let i = row + c;
+            let g = grad[i];
+            let m = g & MAG_MASK;
+            if m < low || mask[i] == 0 {
+                continue;
+            }
+            let o = offs[(g >> 14) as usize];
+            let n1 = grad[(i as isize + o) as usize] & MAG_MASK;
+            let n2 = grad[(i as isize - o) as usize] & MAG_MASK;
+            if m > n1 && m >= n2 {
+                if m >= high {
+                    edges[i] = EDGE;
+                    stack.push(i as u32);
+                } else {
+                    edges[i] = WEAK;
+                }
+            }
+        }
+    }
+    let nb: [isize; 8] = [-w - 1, -w, -w + 1, -1, 1, w - 1, w, w + 1];
+    while let Some(i) = stack.pop() {
+        for o in nb {
+            let j = (i as isize + o) as usize;
+            if edges[j] == WEAK {
+                edges[j] = EDGE;
+                stack.push(j as u32);
+            }
+        }
+    }
+    let mut count = 0usize;
+    for e in edges.iter_mut() {
+        let is_edge = *e == EDGE;
+        *e = if is_edge { EDGE } else { 0 };
+        count += is_edge as usize;
+    }
+    count
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn disc(width: usize, height: usize, cx: f64, cy: f64, r: f64) -> Vec<u8> {
+        let mut img = vec![0u8; width * height];
+        for y in 0..height {
+            for x in 0..width {
+                let d = ((x as f64 - cx).powi(2) + (y as f64 - cy).powi(2)).sqrt();
+                img[y * width + x] = if d < r { 200 } else { 20 };
+            }
+        }
+        img
+    }
+
+    #[test]
+    fn kernel_sums_to_one() {
+        for s in [0.5, 1.0, 1.4, 2.0, 3.3] {
+            let k = gaussian_kernel(s);
+            assert_eq!(k.iter().sum::<u32>(), 1 << KSHIFT, "sigma {s}");
+            assert_eq!(k.len() % 2, 1);
+        }
+    }
+
+    #[test]
+    fn flat_image_smooths_to_itself_and_has_no_edges() {
+        let (w, h) = (40, 30);
+        let img = vec![77u8; w * h];
+        let mask = vec![1u8; w * h];
+        let mut edges = vec![9u8; w * h];
+        let mut c = Canny::new(CannyOptions::default()).unwrap();
+        let r = c.process(&img, w, h, &mask, &mut edges).unwrap();
+        assert_eq!(r.edge_pixels, 0);
+        assert!(edges.iter().all(|&e| e == 0));
+        assert!(c.smoothed().iter().all(|&v| v == 77));
+    }
+
+    #[test]
+    fn circle_edge_is_thin_and_on_the_boundary() {
+        let (w, h) = (120, 100);
+        let (cx, cy, rad) = (60.0, 50.0, 30.0);
+        let img = disc(w, h, cx, cy, rad);
+        let mask = vec![1u8; w * h];
+        let mut edges = vec![0u8; w * h];
+        let mut c = Canny::new(CannyOptions {
+            mode: ThresholdMode::Absolute,
+            low: 50.0,
+            high: 150.0,
+            ..Default::default()
+        })
+        .unwrap();
+        let r = c.process(&img, w, h, &mask, &mut edges).unwrap();
+        // Circumference ~188 pixels; a thin 8-connected ring has about that many.
+        assert!(
+            (150..260).contains(&r.edge_pixels),
+            "{} edge pixels",
+            r.edge_pixels
+        );
+        for y in 0..h {
+            for x in 0..w {
+                if edges[y * w + x] != 0 {
+                    let d = ((x as f64 - cx).powi(2) + (y as f64 - cy).powi(2)).sqrt();
+                    assert!((d - rad).abs() < 1.6, "edge at ({y},{x}) d={d}");
+                }
+            }
+        }
+        // Every direction around the circle is covered (no gaps wider than a few degrees).
+        let mut seen = [false; 72];
+        for y in 0..h {
+            for x in 0..w {
+                if edges[y * w + x] != 0 {
+                    let a = (y as f64 - cy).atan2(x as f64 - cx).to_degrees() + 180.0;
+                    seen[((a / 5.0) as usize).min(71)] = true;
+                }
+            }
+        }
+        assert!(seen.iter().all(|&s| s), "gaps in the ring");
+    }
+
+    #[test]
+    fn mask_removes_edges_and_quantile_mode_adapts() {
+        let (w, h) = (120, 100);
+        let img = disc(w, h, 60.0, 50.0, 30.0);
+        let mut mask = vec![1u8; w * h];
+        for y in 0..h {
+            for x in 0..60 {
+                mask[y * w + x] = 0;
+            }
+        }
+        let mut edges = vec![0u8; w * h];
+        let mut c = Canny::new(CannyOptions::default()).unwrap();
+        let r = c.process(&img, w, h, &mask, &mut edges).unwrap();
+        assert!(r.edge_pixels > 60, "{r:?}");
+        for y in 0..h {
+            for x in 0..60 {
+                assert_eq!(edges[y * w + x], 0);
+            }
+        }
+        // The same image brighter by a factor keeps its edges in quantile mode.
+        let bright: Vec<u8> = img.iter().map(|&v| (v as u32 * 5 / 4) as u8).collect();
+        let mut e2 = vec![0u8; w * h];
+        let r2 = c.process(&bright, w, h, &mask, &mut e2).unwrap();
+        assert!(r2.high > r.high);
+        assert_eq!(r2.edge_pixels, r.edge_pixels);
+    }
+
+    #[test]
+    fn presmoothed_input_and_size_errors() {
+        let (w, h) = (50, 40);
+        let img = disc(w, h, 25.0, 20.0, 10.0);
+        let mask = vec![1u8; w * h];
+        let mut edges = vec![0u8; w * h];
+        let mut c = Canny::new(CannyOptions {
+            sigma: 0.0,
+            mode: ThresholdMode::Absolute,
+            low: 100.0,
+            high: 300.0,
+            ..Default::default()
+        })
+        .unwrap();
+        let r = c.process(&img, w, h, &mask, &mut edges).unwrap();
+        assert!(r.edge_pixels > 40);
+        let e = c.process(&img[1..], w, h, &mask, &mut edges).unwrap_err();
+        assert!(e.to_string().contains("input"), "{e}");
+        let e = c.process(&img, w, h, &mask[1..], &mut edges).unwrap_err();
+        assert!(e.to_string().contains("mask"), "{e}");
+        assert!(Canny::new(CannyOptions {
+            high: 1.5,
+            ..Default::default()
+        })
+        .is_err());
+    }
+}
