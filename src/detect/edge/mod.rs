@@ -56,8 +56,15 @@ pub struct EdgeOptions {
     pub split: SplitOptions,
     pub merge: MergeOptions,
     /// The mask is shrunk by this many pixels before use, so that its own boundary (the
-    /// rim of the lens's image circle, the robot's body) gives no edges. Default 4.
+    /// rim of the lens's image circle, the robot's body) gives no edges. In pixels of the
+    /// working resolution (after `downsample`); at least the Gaussian's radius. Default 5.
     pub mask_margin_px: u32,
+    /// The image is reduced by this factor (mean of factor×factor blocks) before Canny, and
+    /// the calibration rescaled with it (1 = full resolution). Pixel options (tolerances,
+    /// lengths, sigma) are in pixels of the reduced image. When the image size is not a
+    /// multiple of the factor, full resolution is used. Default 2: a GC2450C frame becomes
+    /// 1224×1025, which keeps the edge method within its share of the frame time.
+    pub downsample: u32,
 }
 
 impl Default for EdgeOptions {
@@ -67,7 +74,8 @@ impl Default for EdgeOptions {
             chains: ChainOptions::default(),
             split: SplitOptions::default(),
             merge: MergeOptions::default(),
-            mask_margin_px: 4,
+            mask_margin_px: 5,
+            downsample: 2,
         }
     }
 }
@@ -85,9 +93,15 @@ pub struct EdgeResult {
 #[derive(Debug, Clone)]
 pub struct EdgeDetector {
     options: EdgeOptions,
+    /// The calibration at the working resolution.
     calibration: Calibration,
+    /// Input image size.
     width: usize,
     height: usize,
+    /// Reduction factor and working size.
+    factor: usize,
+    work_width: usize,
+    work_height: usize,
     pixel_angle_rad: f64,
     canny: Canny,
     tracer: ChainTracer,
@@ -99,6 +113,8 @@ pub struct EdgeDetector {
     mask_valid: bool,
     erode_tmp: Vec<u8>,
     erode_run: Vec<u16>,
+    reduced: Vec<u8>,
+    reduced_mask: Vec<u8>,
     edges: Vec<u8>,
     chains: Chains,
     sections: Vec<Section>,
@@ -106,38 +122,63 @@ pub struct EdgeDetector {
 
 impl EdgeDetector {
     /// Sets the method up for `width`×`height` images; the calibration is rescaled to that
-    /// size when it is a uniform scaling of the calibration's own.
+    /// size when it is a uniform scaling of the calibration's own (and then to the working
+    /// resolution, see [`EdgeOptions::downsample`]).
     pub fn new(
         calibration: &Calibration,
         width: usize,
         height: usize,
         options: EdgeOptions,
     ) -> Result<Self, EdgeError> {
-        if width < 3 || height < 3 {
+        if !(1..=8).contains(&options.downsample) {
+            return Err(EdgeError::Options(format!(
+                "downsample = {} must be in 1..=8",
+                options.downsample
+            )));
+        }
+        let mut factor = options.downsample as usize;
+        if width % factor != 0 || height % factor != 0 {
+            tracing::warn!(
+                width,
+                height,
+                factor,
+                "image size is not a multiple of the edge method's downsample factor; using full resolution"
+            );
+            factor = 1;
+        }
+        let (ww, wh) = (width / factor, height / factor);
+        if ww < 3 || wh < 3 {
             return Err(EdgeError::Options(format!(
                 "image {width}x{height} is too small"
             )));
         }
         let calibration = calibration
             .rescaled_to(height as u32, width as u32)
+            .and_then(|c| c.rescaled_to(wh as u32, ww as u32))
             .map_err(EdgeError::Calibration)?;
         let pixel_angle_rad = pixel_angle(&calibration);
-        let n = width * height;
+        let n = ww * wh;
+        let reduced = if factor > 1 { n } else { 0 };
         Ok(EdgeDetector {
             options,
             canny: Canny::new(options.canny)?,
-            tracer: ChainTracer::new(options.chains, width, height)?,
+            tracer: ChainTracer::new(options.chains, ww, wh)?,
             splitter: Splitter::new(options.split, pixel_angle_rad)?,
             merger: Merger::new(options.merge, pixel_angle_rad)?,
             calibration,
             width,
             height,
+            factor,
+            work_width: ww,
+            work_height: wh,
             pixel_angle_rad,
-            mask_seen: vec![0; n],
+            mask_seen: vec![0; width * height],
             mask_eroded: vec![0; n],
             mask_valid: false,
             erode_tmp: vec![0; n],
-            erode_run: vec![0; width],
+            erode_run: vec![0; ww],
+            reduced: vec![0; reduced],
+            reduced_mask: vec![0; reduced],
             edges: vec![0; n],
             chains: Chains::default(),
             sections: Vec::new(),
@@ -148,14 +189,21 @@ impl EdgeDetector {
         &self.options
     }
 
-    /// The calibration at the detector's image size.
+    /// The calibration at the working resolution (chain pixels are in its pixels).
     pub fn calibration(&self) -> &Calibration {
         &self.calibration
     }
 
-    /// Image size (width, height).
+    /// Input image size (width, height).
     pub fn size(&self) -> (usize, usize) {
         (self.width, self.height)
+    }
+
+    /// Working resolution (width, height) and the reduction factor from the input: working
+    /// pixel (r, c) covers input pixels f·r..f·r+f−1, so its centre is at
+    /// (f·r + (f−1)/2, f·c + (f−1)/2).
+    pub fn working_size(&self) -> (usize, usize, usize) {
+        (self.work_width, self.work_height, self.factor)
     }
 
     /// The angle (radians) one pixel subtends, as used to read pixel tolerances.
@@ -163,7 +211,7 @@ impl EdgeDetector {
         self.pixel_angle_rad
     }
 
-    /// Edge pixels of the last run (255 = edge).
+    /// Edge pixels of the last run (255 = edge), at the working resolution.
     pub fn edges(&self) -> &[u8] {
         &self.edges
     }
@@ -224,10 +272,26 @@ impl EdgeDetector {
                 actual: mask.len(),
             });
         }
+        if image.len() != w * h {
+            return Err(EdgeError::Size {
+                what: "image",
+                width: w,
+                height: h,
+                expected: w * h,
+                actual: image.len(),
+            });
+        }
         self.update_mask(mask);
+        let (ww, wh) = (self.work_width, self.work_height);
+        let work: &[u8] = if self.factor > 1 {
+            reduce(image, w, h, self.factor, &mut self.reduced);
+            &self.reduced
+        } else {
+            image
+        };
         let canny = self
             .canny
-            .process(image, w, h, &self.mask_eroded, &mut self.edges)?;
+            .process(work, ww, wh, &self.mask_eroded, &mut self.edges)?;
         let chains = self
             .tracer
             .trace(&self.edges, &self.calibration.model, &mut self.chains)?;
@@ -256,16 +320,71 @@ impl EdgeDetector {
             return;
         }
         self.mask_seen.copy_from_slice(mask);
+        let work: &[u8] = if self.factor > 1 {
+            reduce_mask(
+                mask,
+                self.width,
+                self.height,
+                self.factor,
+                &mut self.reduced_mask,
+            );
+            &self.reduced_mask
+        } else {
+            mask
+        };
         erode(
-            mask,
-            self.width,
-            self.height,
+            work,
+            self.work_width,
+            self.work_height,
             self.options.mask_margin_px as usize,
             &mut self.erode_tmp,
             &mut self.erode_run,
             &mut self.mask_eroded,
         );
         self.mask_valid = true;
+    }
+}
+
+/// Mean of `f`×`f` blocks (rounded), row by row with a 16-bit accumulator.
+fn reduce(image: &[u8], width: usize, height: usize, f: usize, out: &mut [u8]) {
+    let (ww, wh) = (width / f, height / f);
+    let (norm, half) = ((f * f) as u32, (f * f / 2) as u32);
+    for r in 0..wh {
+        let dst = &mut out[r * ww..(r + 1) * ww];
+        if f == 2 {
+            let a = &image[2 * r * width..(2 * r + 1) * width];
+            let b = &image[(2 * r + 1) * width..(2 * r + 2) * width];
+            for (c, d) in dst.iter_mut().enumerate() {
+                let s =
+                    a[2 * c] as u16 + a[2 * c + 1] as u16 + b[2 * c] as u16 + b[2 * c + 1] as u16;
+                *d = ((s + 2) >> 2) as u8;
+            }
+        } else {
+            for (c, d) in dst.iter_mut().enumerate() {
+                let mut s = 0u32;
+                for dr in 0..f {
+                    let row =
+                        &image[(f * r + dr) * width + f * c..(f * r + dr) * width + f * c + f];
+                    s += row.iter().map(|&v| v as u32).sum::<u32>();
+                }
+                *d = ((s + half) / norm) as u8;
+            }
+        }
+    }
+}
+
+/// A reduced pixel is in the mask when all the pixels it covers are.
+fn reduce_mask(mask: &[u8], width: usize, height: usize, f: usize, out: &mut [u8]) {
+    let (ww, wh) = (width / f, height / f);
+    for r in 0..wh {
+        for c in 0..ww {
+            let mut all = true;
+            for dr in 0..f {
+                let row = &mask[(f * r + dr) * width + f * c..(f * r + dr) * width + f * c + f];
+                all &= row.iter().all(|&v| v != 0);
+            }
+            out[r * ww + c] = all as u8;
+        }
     }
 }
 
@@ -448,7 +567,11 @@ mod tests {
             .collect();
         let img = render(&cal, &bounds);
         let mask = fov_mask(&cal);
-        let mut det = EdgeDetector::new(&cal, 360, 300, EdgeOptions::default()).unwrap();
+        let opts = EdgeOptions {
+            downsample: 1,
+            ..Default::default()
+        };
+        let mut det = EdgeDetector::new(&cal, 360, 300, opts).unwrap();
         let mut rows = Vec::new();
         let res = det.process(&img, &mask, &mut rows).unwrap();
         assert!(res.canny.edge_pixels > 500, "{res:?}");
@@ -508,7 +631,38 @@ mod tests {
         ));
         assert!(EdgeDetector::new(&cal, 100, 100, EdgeOptions::default()).is_err());
         let half = EdgeDetector::new(&cal, 60, 50, EdgeOptions::default()).unwrap();
-        assert_eq!(half.calibration().size(), (50, 60));
+        assert_eq!(half.calibration().size(), (25, 30));
+        assert_eq!(half.working_size(), (30, 25, 2));
+        // Odd sizes fall back to full resolution.
+        let odd =
+            EdgeDetector::new(&ideal_pal(101, 121), 121, 101, EdgeOptions::default()).unwrap();
+        assert_eq!(odd.working_size(), (121, 101, 1));
+        let e = EdgeDetector::new(
+            &cal,
+            120,
+            100,
+            EdgeOptions {
+                downsample: 0,
+                ..Default::default()
+            },
+        );
+        assert!(e.is_err());
+    }
+
+    #[test]
+    fn reduce_averages_blocks_and_mask_needs_all() {
+        let (w, h) = (4, 2);
+        let img = [0u8, 4, 10, 10, 8, 4, 10, 11];
+        let mut out = [0u8; 2];
+        reduce(&img, w, h, 2, &mut out);
+        assert_eq!(out, [4, 10]);
+        let mask = [1u8, 1, 1, 0, 1, 1, 1, 1];
+        reduce_mask(&mask, w, h, 2, &mut out);
+        assert_eq!(out, [1, 0]);
+        let img3 = [9u8; 9];
+        let mut one = [0u8; 1];
+        reduce(&img3, 3, 3, 3, &mut one);
+        assert_eq!(one, [9]);
     }
 
     #[test]
