@@ -9,6 +9,7 @@
 pub mod camera;
 pub mod cli;
 pub mod detect;
+pub mod eval;
 pub mod frame;
 pub mod sphere;
 pub mod synth;

@@ -4,6 +4,7 @@
 //! Each subcommand returns an exit code (`ExitCode`) or an error that `main` reports.
 
 mod calib;
+mod synth;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -21,6 +22,8 @@ pub enum Command {
     /// Inspect or produce calibrations.
     #[command(subcommand)]
     Calib(calib::CalibCommand),
+    /// Render a synthetic field image with its ground truth.
+    Synth(Box<synth::SynthArgs>),
 }
 
 /// Parses the process arguments and runs the command.
@@ -29,6 +32,7 @@ pub fn main() -> anyhow::Result<ExitCode> {
     init_logging();
     match cli.command {
         Command::Calib(c) => calib::run(c),
+        Command::Synth(a) => synth::run(*a),
     }
 }
 
