@@ -7,6 +7,18 @@ use criterion::{criterion_group, criterion_main, Criterion};
 use nalgebra::Vector3;
 use omnirow::camera::{ideal_fisheye, ideal_pal, Calibration};
 use omnirow::detect::edge::{Canny, CannyOptions, EdgeDetector, EdgeOptions};
+
+/// Standalone on an unsmoothed full-size image: smooth, and halve it as the detector would.
+fn standalone() -> EdgeOptions {
+    EdgeOptions {
+        canny: CannyOptions {
+            sigma: 1.4,
+            ..Default::default()
+        },
+        downsample: 2,
+        ..Default::default()
+    }
+}
 use std::hint::black_box;
 
 const W: usize = 2448;
@@ -51,7 +63,7 @@ fn bench(c: &mut Criterion) {
         let (img, mask) = frame(&cal);
         let mut g = c.benchmark_group(format!("edge_{name}_2448x2050"));
         g.sample_size(20);
-        let mut canny = Canny::new(CannyOptions::default()).unwrap();
+        let mut canny = Canny::new(standalone().canny).unwrap();
         let mut edges = vec![0u8; W * H];
         g.bench_function("canny", |b| {
             b.iter(|| {
@@ -60,7 +72,7 @@ fn bench(c: &mut Criterion) {
                     .unwrap()
             })
         });
-        let mut det = EdgeDetector::new(&cal, W, H, EdgeOptions::default()).unwrap();
+        let mut det = EdgeDetector::new(&cal, W, H, standalone()).unwrap();
         let mut rows = Vec::new();
         let res = det.process(&img, &mask, &mut rows).unwrap();
         eprintln!("{name}: {res:?}, {} rows", rows.len());

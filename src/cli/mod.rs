@@ -4,6 +4,7 @@
 //! Each subcommand returns an exit code (`ExitCode`) or an error that `main` reports.
 
 mod calib;
+pub mod detect;
 mod synth;
 
 use clap::{Parser, Subcommand};
@@ -24,6 +25,8 @@ pub enum Command {
     Calib(calib::CalibCommand),
     /// Render a synthetic field image with its ground truth.
     Synth(Box<synth::SynthArgs>),
+    /// Detect rows, their vanishing point, heading and tilt in images (one JSON line each).
+    Detect(detect::DetectArgs),
 }
 
 /// Parses the process arguments and runs the command.
@@ -33,6 +36,7 @@ pub fn main() -> anyhow::Result<ExitCode> {
     match cli.command {
         Command::Calib(c) => calib::run(c),
         Command::Synth(a) => synth::run(*a),
+        Command::Detect(a) => detect::run(a),
     }
 }
 

@@ -114,6 +114,18 @@ impl ChainTracer {
         model: &OcamModel,
         out: &mut Chains,
     ) -> Result<ChainResult, EdgeError> {
+        self.trace_located(edges, model, |r, c| [r as f64, c as f64], out)
+    }
+
+    /// As [`ChainTracer::trace`], with each pixel's ray taken at `locate(row, col)`, its
+    /// (sub-pixel) position in the image.
+    pub fn trace_located(
+        &mut self,
+        edges: &[u8],
+        model: &OcamModel,
+        locate: impl Fn(usize, usize) -> [f64; 2],
+        out: &mut Chains,
+    ) -> Result<ChainResult, EdgeError> {
         let (w, h) = (self.width, self.height);
         if edges.len() != w * h {
             return Err(EdgeError::Size {
@@ -167,7 +179,8 @@ impl ChainTracer {
         }
         out.rays.reserve(out.pixels.len());
         for p in &out.pixels {
-            out.rays.push(model.cam2world(p[0] as f64, p[1] as f64));
+            let q = locate(p[0] as usize, p[1] as usize);
+            out.rays.push(model.cam2world(q[0], q[1]));
         }
         Ok(result)
     }

@@ -62,8 +62,8 @@ pub struct EdgeOptions {
     /// The image is reduced by this factor (mean of factor×factor blocks) before Canny, and
     /// the calibration rescaled with it (1 = full resolution). Pixel options (tolerances,
     /// lengths, sigma) are in pixels of the reduced image. When the image size is not a
-    /// multiple of the factor, full resolution is used. Default 2: a GC2450C frame becomes
-    /// 1224×1025, which keeps the edge method within its share of the frame time.
+    /// multiple of the factor, full resolution is used. Default 1: the detector already works
+    /// on a 2×2-binned image for large frames (a GC2450C frame becomes 1224×1025).
     pub downsample: u32,
 }
 
@@ -75,8 +75,27 @@ impl Default for EdgeOptions {
             split: SplitOptions::default(),
             merge: MergeOptions::default(),
             mask_margin_px: 5,
-            downsample: 2,
+            downsample: 1,
         }
+    }
+}
+
+impl EdgeOptions {
+    /// Checks every option (the same checks the stages make when they are built).
+    pub fn validate(&self) -> Result<(), EdgeError> {
+        if !(1..=8).contains(&self.downsample) {
+            return Err(EdgeError::Options(format!(
+                "downsample = {} must be in 1..=8",
+                self.downsample
+            )));
+        }
+        // A plausible angular pixel size; the stages only use it to read pixel options.
+        let pixel = 1e-3;
+        Canny::new(self.canny)?;
+        ChainTracer::new(self.chains, 1, 1)?;
+        Splitter::new(self.split, pixel)?;
+        Merger::new(self.merge, pixel)?;
+        Ok(())
     }
 }
 
@@ -130,12 +149,7 @@ impl EdgeDetector {
         height: usize,
         options: EdgeOptions,
     ) -> Result<Self, EdgeError> {
-        if !(1..=8).contains(&options.downsample) {
-            return Err(EdgeError::Options(format!(
-                "downsample = {} must be in 1..=8",
-                options.downsample
-            )));
-        }
+        options.validate()?;
         let mut factor = options.downsample as usize;
         if width % factor != 0 || height % factor != 0 {
             tracing::warn!(
@@ -292,9 +306,13 @@ impl EdgeDetector {
         let canny = self
             .canny
             .process(work, ww, wh, &self.mask_eroded, &mut self.edges)?;
-        let chains = self
-            .tracer
-            .trace(&self.edges, &self.calibration.model, &mut self.chains)?;
+        let canny_ref = &self.canny;
+        let chains = self.tracer.trace_located(
+            &self.edges,
+            &self.calibration.model,
+            |r, c| canny_ref.subpixel(r, c, ww),
+            &mut self.chains,
+        )?;
         let split =
             self.splitter
                 .split(&self.chains.rays, &self.chains.ranges, &mut self.sections)?;
@@ -568,7 +586,10 @@ mod tests {
         let img = render(&cal, &bounds);
         let mask = fov_mask(&cal);
         let opts = EdgeOptions {
-            downsample: 1,
+            canny: CannyOptions {
+                sigma: 1.4,
+                ..Default::default()
+            },
             ..Default::default()
         };
         let mut det = EdgeDetector::new(&cal, 360, 300, opts).unwrap();
@@ -630,7 +651,11 @@ mod tests {
             Err(EdgeError::Format(PixelFormat::Rgb8))
         ));
         assert!(EdgeDetector::new(&cal, 100, 100, EdgeOptions::default()).is_err());
-        let half = EdgeDetector::new(&cal, 60, 50, EdgeOptions::default()).unwrap();
+        let halve = EdgeOptions {
+            downsample: 2,
+            ..Default::default()
+        };
+        let half = EdgeDetector::new(&cal, 60, 50, halve).unwrap();
         assert_eq!(half.calibration().size(), (25, 30));
         assert_eq!(half.working_size(), (30, 25, 2));
         // Odd sizes fall back to full resolution.
