@@ -37,15 +37,16 @@ fn check_lens(name: &str, cal: Calibration, seed: u64) {
         .map(|n| Vector3::from(*n))
         .collect();
 
-    // Edge rows: most of the support lies on rows through the true vanishing point, close
-    // to a true row (a boundary is a few centimetres from the row's centre line).
+    // Edge rows: most of the support lies on rows through the true vanishing point (within
+    // about two pixels' angle at this resolution), close to a true row (a boundary is a few
+    // centimetres from the row's centre line).
     let edge = detect(&cal, Method::Edge, &img);
     assert!(edge.rows.iter().all(|r| r.method == Method::Edge));
     let mut hits = vec![0usize; normals.len()];
     let (mut on, mut total) = (0u32, 0u32);
     for r in &edge.rows {
         total += r.support;
-        if r.normal.dot(&vp).abs() > 0.005 {
+        if r.normal.dot(&vp).abs() > 0.012 {
             continue;
         }
         let (i, a) = normals

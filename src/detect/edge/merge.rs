@@ -22,7 +22,8 @@ use super::split::Section;
 #[serde(deny_unknown_fields, default)]
 pub struct MergeOptions {
     /// Sections whose normals are closer than this angle (radians) may describe the same
-    /// row. Default 0.02.
+    /// row. Default 0.005: the two boundaries of a distant row are only a few hundredths of
+    /// a radian apart, and merging them mixes two lines into one biased normal.
     pub max_angle_rad: f64,
     /// The merged great circle must fit all points with an RMS distance within this many
     /// pixels (converted with the calibration's angular pixel size). Default 1.5.
@@ -34,7 +35,7 @@ pub struct MergeOptions {
 impl Default for MergeOptions {
     fn default() -> Self {
         MergeOptions {
-            max_angle_rad: 0.02,
+            max_angle_rad: 0.005,
             max_residual_px: 1.5,
             min_support: 30,
         }
