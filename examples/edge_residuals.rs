@@ -31,7 +31,7 @@ fn main() {
             .map(|r| (r.normal.dot(&vp).asin() * 1e3, r.support))
             .filter(|x| x.0.abs() < 17.0)
             .collect();
-        v.sort_by(|a, b| b.1.cmp(&a.1));
+        v.sort_by_key(|x| std::cmp::Reverse(x.1));
         let e = out
             .vanishing_point
             .map(|p| omnirow::sphere::axis_angle(&p.direction, &vp) * 1e3);
