@@ -11,7 +11,7 @@ use omnirow::detect::mask::build_mask;
 use omnirow::detect::smooth::Gaussian;
 use omnirow::detect::threshold::keep_brightest;
 use omnirow::detect::vegetation::vegetation_image;
-use omnirow::detect::{Detection, Detector, DetectorOptions, GreyImage, Points};
+use omnirow::detect::{Detection, Detector, DetectorOptions, GreyImage, Method, Points};
 use omnirow::frame::{ImageView, PixelFormat};
 use std::time::Duration;
 
@@ -38,7 +38,10 @@ fn frames() -> (omnirow::camera::Calibration, Vec<u8>, Vec<u8>) {
 
 fn bench(c: &mut Criterion) {
     let (cal, mono, bayer) = frames();
-    let opts = DetectorOptions::default();
+    let opts = DetectorOptions {
+        method: Method::Hough,
+        ..Default::default()
+    };
     for (name, format, data) in [
         ("mono8", PixelFormat::Mono8, &mono),
         ("bayer_rggb8", PixelFormat::BayerRggb8, &bayer),
