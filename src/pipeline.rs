@@ -137,6 +137,7 @@ pub struct Shared {
     /// Last loop time of each thread, ns since `started` (0 = finished).
     heartbeats: Mutex<Vec<(&'static str, u64)>>,
     rates: Mutex<Rates>,
+    source_error: Mutex<Option<String>>,
 }
 
 #[derive(Default)]
@@ -192,6 +193,7 @@ impl Shared {
                 fps_in: 0.0,
                 fps_out: 0.0,
             }),
+            source_error: Mutex::new(None),
         }
     }
 
@@ -249,6 +251,11 @@ impl Shared {
 
     pub fn source_state(&self) -> SourceState {
         *lock(&self.source_state)
+    }
+
+    /// The error the source stopped with, if it failed.
+    pub fn source_error(&self) -> Option<String> {
+        lock(&self.source_error).clone()
     }
 
     pub fn latest(&self) -> Option<Latest> {
@@ -466,6 +473,7 @@ impl Pipeline {
                                 }
                                 Err(e) => {
                                     tracing::error!("source failed: {e}");
+                                    *lock(&sh.source_error) = Some(e.to_string());
                                     break;
                                 }
                             }

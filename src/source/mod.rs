@@ -2,12 +2,13 @@
 //!
 //! Owns the [`Source`] abstraction the pipeline's source thread drives — replay of MCAP
 //! recordings ([`mcap_replay`]), replay of image folders ([`folder`]), the synthetic drive
-//! (`synthetic`), and later the camera — and the replay [`Pacer`] (recorded rate, a multiple
+//! ([`synthetic`]), and later the camera — and the replay [`Pacer`] (recorded rate, a multiple
 //! of it, or as fast as possible). A source never blocks longer than the timeout it is given,
 //! so the pipeline can always stop it and report its state.
 
 pub mod folder;
 pub mod mcap_replay;
+pub mod synthetic;
 
 use crate::frame::Frame;
 use std::time::{Duration, Instant};
