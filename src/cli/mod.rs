@@ -4,6 +4,7 @@
 //! Each subcommand returns an exit code (`ExitCode`) or an error that `main` reports.
 
 mod calib;
+mod config;
 mod synth;
 
 use clap::{Parser, Subcommand};
@@ -24,6 +25,9 @@ pub enum Command {
     Calib(calib::CalibCommand),
     /// Render a synthetic field image with its ground truth.
     Synth(Box<synth::SynthArgs>),
+    /// Check the node's configuration file, or print the documented defaults.
+    #[command(subcommand)]
+    Config(config::ConfigCommand),
 }
 
 /// Parses the process arguments and runs the command.
@@ -33,6 +37,7 @@ pub fn main() -> anyhow::Result<ExitCode> {
     match cli.command {
         Command::Calib(c) => calib::run(c),
         Command::Synth(a) => synth::run(*a),
+        Command::Config(c) => config::run(c),
     }
 }
 
