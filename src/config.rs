@@ -6,6 +6,7 @@
 //! found by validation are reported at once. Every key is optional: a missing key takes the
 //! default that `config/omnirow.toml` shows.
 
+use crate::detect::DetectorOptions;
 use crate::pipeline::PipelineOptions;
 use crate::record::RecordOptions;
 use crate::source::Rate;
@@ -158,6 +159,8 @@ pub struct Config {
     pub record: Option<RecordOptions>,
     pub log_format: LogFormat,
     pub log_level: String,
+    /// The detector's options (`[detector]`, see `omnirow detect`).
+    pub detector: DetectorOptions,
 }
 
 impl Default for Config {
@@ -181,6 +184,7 @@ struct RawConfig {
     http: Option<RawHttp>,
     record: Option<RawRecord>,
     log: Option<RawLog>,
+    detector: Option<Spanned<DetectorOptions>>,
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -636,6 +640,7 @@ fn validate(raw: RawConfig, c: &mut Check) -> Config {
             sync_interval: Duration::from_millis(sync_ms as u64),
             frames: c.get(&rec.frames, true),
             frame_id: c.get(&cam.frame_id, "omnirow_camera".to_string()),
+            calibration_toml: None,
         })
     } else {
         None
@@ -655,6 +660,29 @@ fn validate(raw: RawConfig, c: &mut Check) -> Config {
         }
     }
 
+    let detector = match &raw.detector {
+        None => DetectorOptions::default(),
+        Some(d) => {
+            let o = d.get_ref();
+            let checks = [
+                o.hough.validate(),
+                o.mask.validate(),
+                o.vanishing.validate(),
+            ];
+            for e in checks.into_iter().filter_map(Result::err) {
+                c.bad("detector", d, e.to_string());
+            }
+            if !(o.max_tilt_deg.is_finite() && (0.0..=45.0).contains(&o.max_tilt_deg)) {
+                c.bad(
+                    "detector.max_tilt_deg",
+                    d,
+                    format!("{} is out of range (0 ..= 45)", o.max_tilt_deg),
+                );
+            }
+            o.clone()
+        }
+    };
+
     Config {
         source,
         max_frames: (max_frames > 0).then_some(max_frames),
@@ -672,6 +700,7 @@ fn validate(raw: RawConfig, c: &mut Check) -> Config {
         record,
         log_format: c.get(&log.format, LogFormat::Human),
         log_level,
+        detector,
     }
 }
 
@@ -741,6 +770,20 @@ mod tests {
         );
         let e = err("[source]\nkind = \"camera\"\n");
         assert!(e.problems[0].message.contains("unknown variant"), "{e}");
+        let e = err("[detector]\nmax_tilt_deg = 99.0\n");
+        assert_eq!(
+            (e.problems[0].line, e.problems[0].key.as_str()),
+            (1, "detector.max_tilt_deg"),
+            "{e}"
+        );
+        let e = err("[detector.hough]\nphi_bins = 1\n");
+        assert_eq!(e.problems[0].key, "detector", "{e}");
+        let e = err("[detector]\nmethd = \"hough\"\n");
+        assert_eq!(
+            (e.problems[0].line, e.problems[0].key.as_str()),
+            (2, "detector.methd"),
+            "{e}"
+        );
         let e = err("[pipeline]\nmin_quality = nan\n");
         assert_eq!(e.problems[0].key, "pipeline.min_quality");
     }

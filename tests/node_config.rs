@@ -28,7 +28,11 @@ fn check(path: &std::path::Path) -> (bool, String) {
 fn shipped_config_passes() {
     let p = concat!(env!("CARGO_MANIFEST_DIR"), "/config/omnirow.toml");
     let out = bin().args(["config", "check", p]).output().unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     assert!(String::from_utf8_lossy(&out.stdout).contains(": ok"));
     // `config default` prints exactly the shipped, documented file.
     let out = bin().args(["config", "default"]).output().unwrap();
@@ -37,10 +41,16 @@ fn shipped_config_passes() {
 
 #[test]
 fn unknown_key_is_named_with_its_line() {
-    let p = write("unknown.toml", "[pipeline]\nframe_queue = 2\n\n[http]\nlisten = \"127.0.0.1:1\"\nlistne = 3\n");
+    let p = write(
+        "unknown.toml",
+        "[pipeline]\nframe_queue = 2\n\n[http]\nlisten = \"127.0.0.1:1\"\nlistne = 3\n",
+    );
     let (ok, err) = check(&p);
     assert!(!ok);
-    assert!(err.contains("unknown.toml:6: `http.listne`: unknown field `listne`"), "{err}");
+    assert!(
+        err.contains("unknown.toml:6: `http.listne`: unknown field `listne`"),
+        "{err}"
+    );
 }
 
 #[test]
@@ -48,7 +58,10 @@ fn wrong_type_is_named_with_its_line() {
     let p = write("type.toml", "# comment\n[record]\nenabled = \"yes\"\n");
     let (ok, err) = check(&p);
     assert!(!ok);
-    assert!(err.contains("type.toml:3: `record.enabled`: invalid type"), "{err}");
+    assert!(
+        err.contains("type.toml:3: `record.enabled`: invalid type"),
+        "{err}"
+    );
 }
 
 #[test]
@@ -59,9 +72,18 @@ fn impossible_values_are_named_with_their_lines() {
     );
     let (ok, err) = check(&p);
     assert!(!ok);
-    assert!(err.contains("values.toml:6: `source.replay.speed`: -1 is out of range"), "{err}");
-    assert!(err.contains("values.toml:4: `source.kind`: `replay` needs source.replay.path"), "{err}");
-    assert!(err.contains("values.toml:2: `pipeline.frame_queue`: 0 is out of range"), "{err}");
+    assert!(
+        err.contains("values.toml:6: `source.replay.speed`: -1 is out of range"),
+        "{err}"
+    );
+    assert!(
+        err.contains("values.toml:4: `source.kind`: `replay` needs source.replay.path"),
+        "{err}"
+    );
+    assert!(
+        err.contains("values.toml:2: `pipeline.frame_queue`: 0 is out of range"),
+        "{err}"
+    );
 }
 
 #[test]

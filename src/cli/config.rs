@@ -34,4 +34,3 @@ pub fn run(cmd: ConfigCommand) -> anyhow::Result<ExitCode> {
         }
     }
 }
-

@@ -74,6 +74,18 @@ pub trait Source: Send {
     fn poll(&mut self, timeout: Duration) -> Result<Poll, SourceError>;
     /// The source's state now.
     fn state(&self) -> SourceState;
+    /// True (the default) for sources that run on their own clock (a camera, a paced replay):
+    /// when the pipeline falls behind, their oldest queued frames are dropped. False for
+    /// replays as fast as possible: the pipeline then waits for the detector instead, and
+    /// every frame is processed.
+    fn realtime(&self) -> bool {
+        true
+    }
+    /// The calibration the frames go with, when the source knows it (the synthetic lens, a
+    /// recording's attached calibration); the configuration may override it.
+    fn calibration(&self) -> Option<&crate::camera::Calibration> {
+        None
+    }
 }
 
 /// How fast a replay runs.

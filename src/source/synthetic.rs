@@ -50,7 +50,7 @@ impl SyntheticDriveOptions {
             pitch_amplitude_deg: c.pitch_amplitude_deg,
             offset_amplitude_m: c.offset_amplitude_m,
             period_s: c.period_s,
-            render_threads: 1,
+            render_threads: 0,
         }
     }
 }
@@ -178,6 +178,10 @@ impl Source for SyntheticDrive {
 
     fn state(&self) -> SourceState {
         self.state
+    }
+
+    fn calibration(&self) -> Option<&Calibration> {
+        Some(&self.cal)
     }
 }
 
