@@ -8,6 +8,7 @@
 
 pub mod camera;
 pub mod cli;
+pub mod config;
 pub mod detect;
 pub mod estimate;
 pub mod eval;

@@ -1,9 +1,11 @@
 //! The node's pipeline: source thread → bounded channel → detector workers → publisher thread,
 //! with a recorder thread on the side.
 //!
-//! Owns the threads, the bounded channels and the real-time policy. The source never blocks
-//! on a slow detector: when the frame channel is full the OLDEST queued frame is dropped and
-//! counted, so the newest frame always wins. Several detector workers take frames in turn;
+//! Owns the threads, the bounded channels and the real-time policy. A real-time source (a
+//! camera, a paced replay) never blocks on a slow detector: when the frame channel is full
+//! the OLDEST queued frame is dropped and counted, so the newest frame always wins. A replay
+//! as fast as possible is not real-time: its thread waits for room instead, so every frame
+//! is processed. Several detector workers take frames in turn;
 //! each frame gets a ticket when it is taken, and the publisher releases estimates strictly
 //! in ticket order, so the output is in frame order whatever the workers' timing. The recorder
 //! has its own bounded channel with the same drop-oldest policy, so a slow disk never stalls
@@ -137,6 +139,7 @@ pub struct Shared {
     /// Last loop time of each thread, ns since `started` (0 = finished).
     heartbeats: Mutex<Vec<(&'static str, u64)>>,
     rates: Mutex<Rates>,
+    source_error: Mutex<Option<String>>,
 }
 
 #[derive(Default)]
@@ -156,7 +159,7 @@ struct Rates {
 
 const SAMPLE_WINDOW: usize = 1024;
 /// A thread that has not looped for this long counts as stuck.
-const STUCK_AFTER: Duration = Duration::from_secs(3);
+const STUCK_AFTER: Duration = Duration::from_secs(5);
 
 fn percentile(v: &VecDeque<f64>, p: f64) -> f64 {
     if v.is_empty() {
@@ -192,6 +195,7 @@ impl Shared {
                 fps_in: 0.0,
                 fps_out: 0.0,
             }),
+            source_error: Mutex::new(None),
         }
     }
 
@@ -223,12 +227,12 @@ impl Shared {
         self.stop.load(Ordering::SeqCst)
     }
 
-    /// True while every pipeline thread that is still running loops (none is stuck).
+    /// True while every pipeline thread that is still running loops (none is stuck; threads
+    /// that finished do not count).
     pub fn alive(&self) -> bool {
         let now = self.elapsed_ns();
         let h = lock(&self.heartbeats);
         !h.is_empty()
-            && h.iter().any(|&(_, t)| t != 0)
             && h.iter()
                 .all(|&(_, t)| t == 0 || now.saturating_sub(t) < STUCK_AFTER.as_nanos() as u64)
     }
@@ -249,6 +253,11 @@ impl Shared {
 
     pub fn source_state(&self) -> SourceState {
         *lock(&self.source_state)
+    }
+
+    /// The error the source stopped with, if it failed.
+    pub fn source_error(&self) -> Option<String> {
+        lock(&self.source_error).clone()
     }
 
     pub fn latest(&self) -> Option<Latest> {
@@ -317,6 +326,23 @@ pub fn send_drop_oldest<T>(tx: &Sender<T>, rx: &Receiver<T>, mut item: T) -> u64
                 }
             }
             Err(TrySendError::Disconnected(_)) => return dropped,
+        }
+    }
+}
+
+/// Sends `item`, waiting while the channel is full (for sources that are not real-time).
+/// Gives up and counts the item as dropped only when `stop` is set while waiting.
+fn send_waiting<T>(tx: &Sender<T>, mut item: T, stop: &AtomicBool) -> u64 {
+    loop {
+        match tx.send_timeout(item, Duration::from_millis(50)) {
+            Ok(()) => return 0,
+            Err(crossbeam_channel::SendTimeoutError::Timeout(back)) => {
+                if stop.load(Ordering::SeqCst) {
+                    return 1;
+                }
+                item = back;
+            }
+            Err(crossbeam_channel::SendTimeoutError::Disconnected(_)) => return 0,
         }
     }
 }
@@ -426,6 +452,7 @@ impl Pipeline {
                     Box::new(move || {
                         let t0 = Instant::now();
                         let mut n = 0u64;
+                        let realtime = source.realtime();
                         loop {
                             sh.beat(id);
                             if sh.stop_requested()
@@ -443,14 +470,19 @@ impl Pipeline {
                                     sh.frames_in.fetch_add(1, Ordering::Relaxed);
                                     let f = Arc::new(f);
                                     if recording {
-                                        let d = send_drop_oldest(
-                                            &rtx,
-                                            &rrx,
-                                            RecordItem::Frame(f.clone()),
-                                        );
+                                        let item = RecordItem::Frame(f.clone());
+                                        let d = if realtime {
+                                            send_drop_oldest(&rtx, &rrx, item)
+                                        } else {
+                                            send_waiting(&rtx, item, &sh.stop)
+                                        };
                                         sh.record_dropped.fetch_add(d, Ordering::Relaxed);
                                     }
-                                    let d = send_drop_oldest(&tx, &rx, f);
+                                    let d = if realtime {
+                                        send_drop_oldest(&tx, &rx, f)
+                                    } else {
+                                        send_waiting(&tx, f, &sh.stop)
+                                    };
                                     if d > 0 {
                                         sh.dropped.fetch_add(d, Ordering::Relaxed);
                                         tracing::debug!(
@@ -466,6 +498,7 @@ impl Pipeline {
                                 }
                                 Err(e) => {
                                     tracing::error!("source failed: {e}");
+                                    *lock(&sh.source_error) = Some(e.to_string());
                                     break;
                                 }
                             }

@@ -4,8 +4,10 @@
 //! Each subcommand returns an exit code (`ExitCode`) or an error that `main` reports.
 
 mod calib;
+mod config;
 pub mod detect;
 mod eval;
+mod run;
 mod synth;
 
 use clap::{Parser, Subcommand};
@@ -30,17 +32,36 @@ pub enum Command {
     Detect(detect::DetectArgs),
     /// Regenerate the paper's evaluation on synthetic images: tables and plots.
     Eval(eval::EvalArgs),
+    /// Check the node's configuration file, or print the documented defaults.
+    #[command(subcommand)]
+    Config(config::ConfigCommand),
+    /// Run the node: frames from a source, heading and tilt published at frame rate.
+    /// Without a configuration: the synthetic drive.
+    Run(Box<run::RunArgs>),
+    /// Run the node and record frames and estimates into MCAP files in DIR.
+    Record {
+        #[arg(long, value_name = "DIR")]
+        out: std::path::PathBuf,
+        #[command(flatten)]
+        args: Box<run::RunArgs>,
+    },
 }
 
 /// Parses the process arguments and runs the command.
 pub fn main() -> anyhow::Result<ExitCode> {
     let cli = Cli::parse();
-    init_logging();
+    if !matches!(cli.command, Command::Run(_) | Command::Record { .. }) {
+        init_logging();
+    }
     match cli.command {
         Command::Calib(c) => calib::run(c),
         Command::Synth(a) => synth::run(*a),
         Command::Detect(a) => detect::run(a),
         Command::Eval(a) => eval::run(a),
+        Command::Config(c) => config::run(c),
+        // The node sets up logging from its configuration.
+        Command::Run(a) => run::run(*a, None),
+        Command::Record { out, args } => run::run(*args, Some(out)),
     }
 }
 

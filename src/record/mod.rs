@@ -6,7 +6,7 @@
 //! Every frame closes its chunk and hands it to the OS; the file is synced to disk at least
 //! every `sync_interval`, so a power cut loses at most that much. Files rotate by size or
 //! duration, and recording stops (detection goes on) when free space would fall below the
-//! reserve. [`image_msg`] holds the CDR and Foxglove image codecs.
+//! reserve. Each file carries the calibration as the attachment `calibration.toml`. [`image_msg`] holds the CDR and Foxglove image codecs.
 
 pub mod image_msg;
 
@@ -24,6 +24,9 @@ pub const IMAGE_TOPIC: &str = "/omnirow/image_raw";
 pub const ESTIMATE_TOPIC: &str = "/omnirow/estimate";
 /// Topic of the ground-truth channel (synthetic frames only).
 pub const TRUTH_TOPIC: &str = "/omnirow/ground_truth";
+
+/// Name of the attachment holding the calibration (omnirow TOML).
+pub const CALIBRATION_ATTACHMENT: &str = "calibration.toml";
 
 /// A JSON schema (draft 2020-12, as Foxglove reads it) for the estimate channel.
 pub const ESTIMATE_JSON_SCHEMA: &str = r#"{"title":"omnirow.Estimate","type":"object","properties":{"schema_version":{"type":"integer"},"seq":{"type":"integer"},"capture_ns":{"type":"integer"},"receive_ns":{"type":"integer"},"publish_ns":{"type":"integer"},"latency_ms":{"type":"number"},"detector_ms":{"type":"number"},"status":{"type":"string","enum":["ok","degraded","no_rows","no_vanishing_point","camera_lost","error"]},"heading_rad":{"type":["number","null"]},"tilt_rad":{"type":["number","null"]},"vanishing_point":{"type":["array","null"],"items":{"type":"number"}},"rows":{"type":"array","items":{"type":"object","properties":{"normal":{"type":"array","items":{"type":"number"}},"method":{"type":"string"},"support":{"type":"integer"}}}},"quality":{"type":"number"},"error":{"type":"string"},"truth":{"type":"object"}}}"#;
@@ -67,6 +70,9 @@ pub struct RecordOptions {
     pub frames: bool,
     /// `frame_id` written into the image headers.
     pub frame_id: String,
+    /// The calibration the frames go with (omnirow TOML), attached to every file as
+    /// `calibration.toml` so that a recording replays with its own calibration.
+    pub calibration_toml: Option<String>,
 }
 
 impl Default for RecordOptions {
@@ -80,6 +86,7 @@ impl Default for RecordOptions {
             sync_interval: Duration::from_secs(1),
             frames: true,
             frame_id: "omnirow_camera".into(),
+            calibration_toml: None,
         }
     }
 }
@@ -193,6 +200,19 @@ impl Recorder {
         let mut writer = opts
             .create(BufWriter::with_capacity(1 << 20, f))
             .map_err(mc)?;
+        // The calibration first, before any chunk, where a replay looks for it.
+        if let Some(cal) = &self.opts.calibration_toml {
+            let now = crate::frame::now_ns();
+            writer
+                .attach(&mcap::Attachment {
+                    log_time: now,
+                    create_time: now,
+                    name: CALIBRATION_ATTACHMENT.into(),
+                    media_type: "application/toml".into(),
+                    data: std::borrow::Cow::Borrowed(cal.as_bytes()),
+                })
+                .map_err(mc)?;
+        }
         let none = BTreeMap::new();
         let img_schema = writer
             .add_schema(

@@ -161,6 +161,10 @@ impl Source for FolderReplay {
     fn state(&self) -> SourceState {
         self.state
     }
+
+    fn realtime(&self) -> bool {
+        self.opts.rate != Rate::Max
+    }
 }
 
 #[cfg(test)]

@@ -56,6 +56,7 @@ pub struct McapReplay {
     bytes_read: u64,
     state: SourceState,
     scratch: Vec<u8>,
+    calibration: Option<crate::camera::Calibration>,
 }
 
 impl McapReplay {
@@ -77,6 +78,7 @@ impl McapReplay {
             });
         }
         drop(file);
+        let calibration = recorded_calibration(&opts.path)?;
         let file = File::open(&opts.path).map_err(|source| SourceError::Io {
             path: opts.path.clone(),
             source,
@@ -96,6 +98,7 @@ impl McapReplay {
             bytes_read: 0,
             state: SourceState::Starting,
             scratch: Vec::new(),
+            calibration,
         })
     }
 
@@ -276,6 +279,49 @@ impl McapReplay {
     }
 }
 
+/// The calibration attached to a recording (`calibration.toml`, written before the first
+/// chunk), if any. Reads only up to the first chunk or message.
+pub fn recorded_calibration(
+    path: &std::path::Path,
+) -> Result<Option<crate::camera::Calibration>, SourceError> {
+    let io = |source| SourceError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let mut file = File::open(path).map_err(io)?;
+    let mut reader = LinearReader::new_with_options(
+        LinearReaderOptions::default()
+            .with_emit_chunks(true)
+            .with_record_length_limit(1 << 30),
+    );
+    while let Some(ev) = reader.next_event() {
+        let Ok(ev) = ev else { return Ok(None) };
+        match ev {
+            LinearReadEvent::ReadRequest(n) => {
+                let got = read_retry(&mut file, reader.insert(n)).map_err(io)?;
+                reader.notify_read(got);
+            }
+            LinearReadEvent::Record { opcode, data } => match mcap::parse_record(opcode, data) {
+                Ok(Record::Attachment { header, data, .. })
+                    if header.name == crate::record::CALIBRATION_ATTACHMENT =>
+                {
+                    let text = String::from_utf8_lossy(&data);
+                    let cal = crate::camera::Calibration::parse_toml(&text, path).map_err(|e| {
+                        SourceError::Invalid {
+                            path: path.to_path_buf(),
+                            problem: format!("attached calibration: {e}"),
+                        }
+                    })?;
+                    return Ok(Some(cal));
+                }
+                Ok(Record::Chunk { .. }) | Ok(Record::Message { .. }) | Err(_) => return Ok(None),
+                Ok(_) => {}
+            },
+        }
+    }
+    Ok(None)
+}
+
 fn new_reader() -> LinearReader {
     LinearReader::new_with_options(
         LinearReaderOptions::default()
@@ -352,6 +398,14 @@ impl Source for McapReplay {
 
     fn state(&self) -> SourceState {
         self.state
+    }
+
+    fn realtime(&self) -> bool {
+        self.opts.rate != Rate::Max
+    }
+
+    fn calibration(&self) -> Option<&crate::camera::Calibration> {
+        self.calibration.as_ref()
     }
 }
 

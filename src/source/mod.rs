@@ -2,12 +2,13 @@
 //!
 //! Owns the [`Source`] abstraction the pipeline's source thread drives — replay of MCAP
 //! recordings ([`mcap_replay`]), replay of image folders ([`folder`]), the synthetic drive
-//! (`synthetic`), and later the camera — and the replay [`Pacer`] (recorded rate, a multiple
+//! ([`synthetic`]), and later the camera — and the replay [`Pacer`] (recorded rate, a multiple
 //! of it, or as fast as possible). A source never blocks longer than the timeout it is given,
 //! so the pipeline can always stop it and report its state.
 
 pub mod folder;
 pub mod mcap_replay;
+pub mod synthetic;
 
 use crate::frame::Frame;
 use std::time::{Duration, Instant};
@@ -73,6 +74,18 @@ pub trait Source: Send {
     fn poll(&mut self, timeout: Duration) -> Result<Poll, SourceError>;
     /// The source's state now.
     fn state(&self) -> SourceState;
+    /// True (the default) for sources that run on their own clock (a camera, a paced replay):
+    /// when the pipeline falls behind, their oldest queued frames are dropped. False for
+    /// replays as fast as possible: the pipeline then waits for the detector instead, and
+    /// every frame is processed.
+    fn realtime(&self) -> bool {
+        true
+    }
+    /// The calibration the frames go with, when the source knows it (the synthetic lens, a
+    /// recording's attached calibration); the configuration may override it.
+    fn calibration(&self) -> Option<&crate::camera::Calibration> {
+        None
+    }
 }
 
 /// How fast a replay runs.

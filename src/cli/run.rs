@@ -1,0 +1,418 @@
+//! `omnirow run` (the node) and `omnirow record` (the node, recording).
+//!
+//! Owns assembling the node from its configuration — source, calibration, detector workers,
+//! publishers, recorder, HTTP endpoint — and its life as a daemon: systemd notifications
+//! (READY once frames flow, WATCHDOG only while the pipeline is alive, STATUS once a second,
+//! STOPPING on shutdown) and SIGTERM/SIGINT handling. Signals go through `signal-hook`'s
+//! flag registration: it sets an `AtomicBool` from an async-signal-safe handler, keeps
+//! `unsafe` out of this crate, and its `register_conditional_shutdown` makes a second signal
+//! exit at once; the main loop polls the flag every 20 ms.
+
+use crate::camera::{Calibration, IdealLens};
+use crate::config::{CalibrationChoice, Config, Lens, LogFormat, SourceConfig, StdoutMode};
+use crate::detect::{Detection, Detector};
+use crate::frame::ImageView;
+use crate::notify::Notifier;
+use crate::pipeline::{Latest, Pipeline, Processor};
+use crate::publish::http::{HttpServer, OverlayFn};
+use crate::publish::stdout::StdoutPublisher;
+use crate::publish::udp::{UdpOptions, UdpPublisher};
+use crate::publish::Publisher;
+use crate::record::Recorder;
+use crate::source::folder::{FolderOptions, FolderReplay};
+use crate::source::mcap_replay::{McapReplay, McapReplayOptions};
+use crate::source::synthetic::{SyntheticDrive, SyntheticDriveOptions};
+use crate::source::{Rate, Source, SourceState};
+use anyhow::{bail, Context};
+use clap::Args;
+use std::io::IsTerminal;
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+/// Options of `omnirow run` (they override the configuration file).
+#[derive(Debug, Clone, Args)]
+pub struct RunArgs {
+    /// Configuration file (config/omnirow.toml documents it). Without one: the built-in
+    /// defaults, i.e. the synthetic drive.
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// Stop after N frames.
+    #[arg(long, value_name = "N")]
+    pub frames: Option<u64>,
+    /// Stop after this many seconds.
+    #[arg(long, value_name = "SECONDS")]
+    pub duration: Option<f64>,
+    /// Print estimates as JSON lines on stdout (the default when stdout is a terminal).
+    #[arg(long, conflicts_with = "no_print")]
+    pub print: bool,
+    /// Never print estimates on stdout.
+    #[arg(long)]
+    pub no_print: bool,
+    /// Replay this MCAP file or image folder instead of the configured source.
+    #[arg(long, value_name = "PATH")]
+    pub replay: Option<PathBuf>,
+    /// Replay rate: `recorded`, `max` (as fast as possible), or a multiple of the recorded
+    /// rate such as `2`.
+    #[arg(long, value_name = "RATE")]
+    pub rate: Option<String>,
+    /// Replay in a loop.
+    #[arg(long = "loop")]
+    pub looping: bool,
+    /// Send estimates to this UDP destination (repeatable; replaces the configured ones).
+    #[arg(long, value_name = "ADDR:PORT")]
+    pub udp: Vec<SocketAddr>,
+    /// HTTP listen address, or `off`.
+    #[arg(long, value_name = "ADDR:PORT")]
+    pub http: Option<String>,
+    /// Calibration: `ideal:fisheye185`, `ideal:pal`, or a file.
+    #[arg(long, value_name = "CALIB")]
+    pub calib: Option<String>,
+    /// Detector worker threads.
+    #[arg(long, value_name = "N")]
+    pub workers: Option<usize>,
+    /// Frame queue capacity between the source and the detector.
+    #[arg(long, value_name = "N")]
+    pub frame_queue: Option<usize>,
+}
+
+/// Loads the configuration and applies the command-line overrides.
+fn configure(args: &RunArgs) -> anyhow::Result<Config> {
+    let mut cfg = match &args.config {
+        Some(p) => Config::load(p)?,
+        None => Config::default(),
+    };
+    if let Some(n) = args.frames {
+        cfg.pipeline.max_frames = Some(n);
+    }
+    if let Some(s) = args.duration {
+        if !(s > 0.0 && s.is_finite()) {
+            bail!("--duration must be a positive number of seconds");
+        }
+        cfg.pipeline.max_duration = Some(Duration::from_secs_f64(s));
+    }
+    if let Some(path) = &args.replay {
+        let (rate, looping, topic, fps) = match &cfg.source {
+            SourceConfig::Replay(r) => (r.rate, r.looping, r.topic.clone(), r.fps),
+            _ => (Rate::Recorded(1.0), false, None, 15.0),
+        };
+        cfg.source = SourceConfig::Replay(crate::config::ReplayConfig {
+            path: path.clone(),
+            rate,
+            looping,
+            topic,
+            fps,
+        });
+    }
+    if let SourceConfig::Replay(r) = &mut cfg.source {
+        if let Some(rate) = &args.rate {
+            r.rate = match rate.as_str() {
+                "recorded" => Rate::Recorded(1.0),
+                "max" => Rate::Max,
+                x => match x.parse::<f64>() {
+                    Ok(v) if v > 0.0 && v.is_finite() => Rate::Recorded(v),
+                    _ => bail!("--rate {x}: expected `recorded`, `max` or a positive multiple"),
+                },
+            };
+        }
+        r.looping |= args.looping;
+    } else if args.rate.is_some() || args.looping {
+        bail!("--rate and --loop apply to replays (--replay PATH or [source] kind = \"replay\")");
+    }
+    if !args.udp.is_empty() {
+        cfg.udp = args.udp.clone();
+    }
+    if let Some(h) = &args.http {
+        cfg.http = if h == "off" {
+            None
+        } else {
+            Some(
+                h.parse()
+                    .with_context(|| format!("--http {h}: expected ADDR:PORT or off"))?,
+            )
+        };
+    }
+    if let Some(c) = &args.calib {
+        cfg.calibration = match c.as_str() {
+            "ideal:fisheye185" => CalibrationChoice::Ideal(Lens::Fisheye185),
+            "ideal:pal" => CalibrationChoice::Ideal(Lens::Pal),
+            "auto" => CalibrationChoice::Auto,
+            p => CalibrationChoice::File(PathBuf::from(p)),
+        };
+    }
+    if let Some(w) = args.workers {
+        if !(1..=8).contains(&w) {
+            bail!("--workers must be 1..=8");
+        }
+        cfg.workers = w;
+    }
+    if let Some(q) = args.frame_queue {
+        if !(1..=64).contains(&q) {
+            bail!("--frame-queue must be 1..=64");
+        }
+        cfg.pipeline.frame_queue = q;
+    }
+    if args.print {
+        cfg.stdout = StdoutMode::Always;
+    }
+    if args.no_print {
+        cfg.stdout = StdoutMode::Never;
+    }
+    Ok(cfg)
+}
+
+fn init_logging(cfg: &Config) {
+    use tracing_subscriber::EnvFilter;
+    let filter =
+        EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new(&cfg.log_level));
+    let json = cfg.log_format == LogFormat::Json
+        || std::env::var("OMNIROW_LOG_FORMAT").is_ok_and(|v| v == "json");
+    let builder = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr);
+    let _ = if json {
+        builder.json().try_init()
+    } else {
+        builder.try_init()
+    };
+}
+
+fn ideal(lens: Lens) -> IdealLens {
+    match lens {
+        Lens::Fisheye185 => IdealLens::Fisheye185,
+        Lens::Pal => IdealLens::Pal,
+    }
+}
+
+/// The detector as the pipeline's processing step.
+struct DetectorWorker(Detector);
+
+impl Processor for DetectorWorker {
+    fn process(
+        &mut self,
+        view: &ImageView,
+        out: &mut Detection,
+    ) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
+        self.0.process(view, out).map_err(Into::into)
+    }
+}
+
+/// `omnirow run` and `omnirow record --out DIR`.
+pub fn run(args: RunArgs, record_to: Option<PathBuf>) -> anyhow::Result<ExitCode> {
+    let mut cfg = configure(&args)?;
+    if let Some(dir) = record_to {
+        let mut rec = cfg.record.clone().unwrap_or_default();
+        rec.dir = dir;
+        rec.frame_id = cfg.frame_id.clone();
+        cfg.record = Some(rec);
+    }
+    init_logging(&cfg);
+
+    // Source (opened now, so a missing file is an error before anything starts).
+    let source: Box<dyn Source> = match &cfg.source {
+        SourceConfig::Synthetic(s) => Box::new(
+            SyntheticDrive::new(SyntheticDriveOptions::from_config(s))
+                .context("synthetic drive")?,
+        ),
+        SourceConfig::Replay(r) if r.path.is_dir() => {
+            Box::new(FolderReplay::open(FolderOptions {
+                dir: r.path.clone(),
+                fps: r.fps,
+                rate: r.rate,
+                looping: r.looping,
+            })?)
+        }
+        SourceConfig::Replay(r) => Box::new(McapReplay::open(McapReplayOptions {
+            path: r.path.clone(),
+            rate: r.rate,
+            looping: r.looping,
+            topic: r.topic.clone(),
+        })?),
+    };
+    let cal = match &cfg.calibration {
+        CalibrationChoice::File(p) => Calibration::load(p)?,
+        CalibrationChoice::Ideal(l) => ideal(*l).calibration(2050, 2448),
+        CalibrationChoice::Auto => match source.calibration() {
+            Some(c) => c.clone(),
+            None => {
+                tracing::warn!("no calibration configured or recorded: using the ideal 185° fisheye (camera.calibration)");
+                IdealLens::Fisheye185.calibration(2050, 2448)
+            }
+        },
+    };
+    if let Some(rec) = cfg.record.as_mut() {
+        rec.calibration_toml = Some(cal.to_toml());
+    }
+
+    // Detector workers.
+    let opts = cfg.detector.clone();
+    let mut processors: Vec<Box<dyn Processor>> = Vec::new();
+    for _ in 0..cfg.workers {
+        processors.push(Box::new(DetectorWorker(
+            Detector::new(&cal, opts.clone()).context("detector")?,
+        )));
+    }
+
+    // Publishers.
+    let mut publishers: Vec<Box<dyn Publisher>> = Vec::new();
+    if !cfg.udp.is_empty() {
+        publishers.push(Box::new(UdpPublisher::new(&UdpOptions {
+            destinations: cfg.udp.clone(),
+            multicast_ttl: cfg.multicast_ttl,
+            multicast_loop: cfg.multicast_loop,
+            multicast_interface: cfg.multicast_interface,
+        })?));
+        tracing::info!(destinations = ?cfg.udp, "publishing estimates over UDP");
+    }
+    let print = match cfg.stdout {
+        StdoutMode::Always => true,
+        StdoutMode::Never => false,
+        StdoutMode::Auto => std::io::stdout().is_terminal(),
+    };
+    if print {
+        publishers.push(Box::new(StdoutPublisher::new()));
+    }
+
+    let recorder = match &cfg.record {
+        Some(r) => Some(Recorder::new(r.clone())?),
+        None => None,
+    };
+
+    // Signals before threads start, so none is missed.
+    let term = Arc::new(AtomicBool::new(false));
+    for sig in [signal_hook::consts::SIGTERM, signal_hook::consts::SIGINT] {
+        // A second signal while the first is being handled exits at once (code 1).
+        signal_hook::flag::register_conditional_shutdown(sig, 1, term.clone())
+            .context("installing the signal handler")?;
+        signal_hook::flag::register(sig, term.clone()).context("installing the signal handler")?;
+    }
+
+    let notifier = Notifier::from_env()?;
+    let pipeline = Pipeline::start(
+        source,
+        processors,
+        publishers,
+        recorder,
+        cfg.pipeline.clone(),
+    )?;
+    let shared = pipeline.shared();
+
+    let http = match cfg.http {
+        Some(addr) => {
+            let overlay_cal = cal.clone();
+            let overlay: OverlayFn = Arc::new(move |l: &Latest| overlay_png(&overlay_cal, l));
+            Some(
+                HttpServer::start(addr, shared.clone(), overlay)
+                    .with_context(|| format!("HTTP endpoint on {addr}"))?,
+            )
+        }
+        None => None,
+    };
+
+    // Supervision: systemd notifications and signals.
+    let watchdog_every = notifier.watchdog_interval();
+    let mut ready = false;
+    let mut stopping = false;
+    let mut last_watchdog: Option<Instant> = None;
+    let mut last_status = Instant::now();
+    let mut was_alive = true;
+    while !pipeline.is_finished() {
+        std::thread::sleep(Duration::from_millis(20));
+        if term.load(Ordering::Relaxed) && !stopping {
+            stopping = true;
+            tracing::info!("signal received: stopping the source, draining the pipeline");
+            notifier.stopping("stopping: draining the pipeline");
+            pipeline.request_stop();
+        }
+        if !ready && shared.frames_in() > 0 {
+            ready = true;
+            notifier.ready("streaming: first frames received");
+        }
+        let alive = shared.alive();
+        if alive != was_alive {
+            if alive {
+                tracing::info!("pipeline alive again");
+            } else {
+                tracing::error!(stuck = ?shared.stuck_threads(), "pipeline stuck: systemd watchdog no longer fed");
+            }
+            was_alive = alive;
+        }
+        if let Some(every) = watchdog_every {
+            if alive && last_watchdog.map_or(true, |t| t.elapsed() >= every) {
+                notifier.watchdog();
+                last_watchdog = Some(Instant::now());
+            }
+        }
+        if last_status.elapsed() >= cfg.pipeline.status_interval && !stopping {
+            last_status = Instant::now();
+            let st = shared.status();
+            notifier.status(&format!(
+                "{}: {:.1} fps, {} in, {} out, {} dropped, detector p99 {:.1} ms, {}",
+                st.source_state.name(),
+                st.fps_out,
+                st.frames_in,
+                st.frames_out,
+                st.dropped,
+                st.detector_p99_ms,
+                st.recording
+            ));
+        }
+    }
+    if !stopping {
+        notifier.stopping("stopping: source ended");
+    }
+    let st = pipeline.join().map_err(anyhow::Error::msg)?;
+    if let Some(h) = http {
+        h.stop();
+    }
+    tracing::info!(
+        frames_in = st.frames_in,
+        frames_out = st.frames_out,
+        dropped = st.dropped,
+        record_dropped = st.record_dropped,
+        recorded_frames = st.recorded_frames,
+        detector_p50_ms = format_args!("{:.2}", st.detector_p50_ms),
+        detector_p99_ms = format_args!("{:.2}", st.detector_p99_ms),
+        latency_p50_ms = format_args!("{:.2}", st.latency_p50_ms),
+        latency_p99_ms = format_args!("{:.2}", st.latency_p99_ms),
+        "finished"
+    );
+    if let Some(e) = shared.source_error() {
+        bail!("source failed: {e}");
+    }
+    if st.source_state == SourceState::Lost {
+        bail!("the camera was lost");
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// The overlay of the latest frame as PNG: rows and vanishing point drawn over the image.
+fn overlay_png(cal: &Calibration, l: &Latest) -> Result<Vec<u8>, String> {
+    let view = l.frame.view().map_err(|e| e.to_string())?;
+    let view_cal = if cal.size() == (view.height, view.width) {
+        cal.clone()
+    } else {
+        cal.rescaled_to(view.height, view.width)?
+    };
+    let mut rgb = Vec::new();
+    crate::detect::overlay::draw_overlay(&view, &view_cal, &l.detection, &mut rgb)
+        .map_err(|e| e.to_string())?;
+    let mut png = Vec::new();
+    let enc = image::codecs::png::PngEncoder::new_with_quality(
+        &mut png,
+        image::codecs::png::CompressionType::Fast,
+        image::codecs::png::FilterType::Sub,
+    );
+    use image::ImageEncoder;
+    enc.write_image(
+        &rgb,
+        view.width,
+        view.height,
+        image::ExtendedColorType::Rgb8,
+    )
+    .map_err(|e| e.to_string())?;
+    Ok(png)
+}

@@ -1,0 +1,94 @@
+//! `omnirow config check`: the real binary on good and bad configuration files.
+
+use std::path::PathBuf;
+use std::process::Command;
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_omnirow"))
+}
+
+fn write(name: &str, text: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("omnirow-cfgtest-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+/// Runs `config check` and returns (success, stderr).
+fn check(path: &std::path::Path) -> (bool, String) {
+    let out = bin().args(["config", "check"]).arg(path).output().unwrap();
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn shipped_config_passes() {
+    let p = concat!(env!("CARGO_MANIFEST_DIR"), "/config/omnirow.toml");
+    let out = bin().args(["config", "check", p]).output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(String::from_utf8_lossy(&out.stdout).contains(": ok"));
+    // `config default` prints exactly the shipped, documented file.
+    let out = bin().args(["config", "default"]).output().unwrap();
+    assert_eq!(out.stdout, std::fs::read(p).unwrap());
+}
+
+#[test]
+fn unknown_key_is_named_with_its_line() {
+    let p = write(
+        "unknown.toml",
+        "[pipeline]\nframe_queue = 2\n\n[http]\nlisten = \"127.0.0.1:1\"\nlistne = 3\n",
+    );
+    let (ok, err) = check(&p);
+    assert!(!ok);
+    assert!(
+        err.contains("unknown.toml:6: `http.listne`: unknown field `listne`"),
+        "{err}"
+    );
+}
+
+#[test]
+fn wrong_type_is_named_with_its_line() {
+    let p = write("type.toml", "# comment\n[record]\nenabled = \"yes\"\n");
+    let (ok, err) = check(&p);
+    assert!(!ok);
+    assert!(
+        err.contains("type.toml:3: `record.enabled`: invalid type"),
+        "{err}"
+    );
+}
+
+#[test]
+fn impossible_values_are_named_with_their_lines() {
+    let p = write(
+        "values.toml",
+        "[pipeline]\nframe_queue = 0\n[source]\nkind = \"replay\"\n[source.replay]\nspeed = -1.0\n",
+    );
+    let (ok, err) = check(&p);
+    assert!(!ok);
+    assert!(
+        err.contains("values.toml:6: `source.replay.speed`: -1 is out of range"),
+        "{err}"
+    );
+    assert!(
+        err.contains("values.toml:4: `source.kind`: `replay` needs source.replay.path"),
+        "{err}"
+    );
+    assert!(
+        err.contains("values.toml:2: `pipeline.frame_queue`: 0 is out of range"),
+        "{err}"
+    );
+}
+
+#[test]
+fn missing_file_is_an_error_naming_it() {
+    let (ok, err) = check(std::path::Path::new("/nonexistent/omnirow.toml"));
+    assert!(!ok);
+    assert!(err.contains("/nonexistent/omnirow.toml"), "{err}");
+}

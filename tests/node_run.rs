@@ -1,0 +1,529 @@
+//! The node for real: `omnirow run` and `omnirow record` as processes, read through real UDP
+//! and TCP sockets and a real Unix datagram socket (systemd notify), stopped with SIGTERM.
+
+use omnirow::estimate::{Estimate, Status};
+use std::io::{Read, Write};
+use std::net::{TcpListener, TcpStream, UdpSocket};
+use std::os::unix::net::UnixDatagram;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+fn bin() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_omnirow"));
+    c.env("OMNIROW_LOG_FORMAT", "json").env("RUST_LOG", "info");
+    c
+}
+
+fn tmpdir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("omnirow-node-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// A small, fast synthetic drive (the detector's accuracy is guarded elsewhere).
+fn small_config(dir: &Path, extra: &str) -> PathBuf {
+    let p = dir.join("omnirow.toml");
+    std::fs::write(
+        &p,
+        format!(
+            "[source.synthetic]\nwidth = 408\nheight = 342\nfps = 30.0\nseed = 5\n\n[http]\nenabled = false\n\n{extra}"
+        ),
+    )
+    .unwrap();
+    p
+}
+
+fn udp() -> (UdpSocket, String) {
+    let s = UdpSocket::bind("127.0.0.1:0").unwrap();
+    s.set_read_timeout(Some(Duration::from_millis(200)))
+        .unwrap();
+    let a = s.local_addr().unwrap().to_string();
+    (s, a)
+}
+
+/// Reads estimates from `sock` until `child` exits (plus a grace period for late datagrams).
+fn collect(sock: &UdpSocket, child: &mut Child, limit: Duration) -> Vec<Estimate> {
+    let t0 = Instant::now();
+    let mut out = Vec::new();
+    let mut buf = vec![0u8; 65536];
+    let mut exited_at = None;
+    loop {
+        if let Ok(n) = sock.recv(&mut buf) {
+            out.push(serde_json::from_slice(&buf[..n]).expect("a datagram is one JSON estimate"));
+            continue;
+        }
+        if exited_at.is_none() && child.try_wait().unwrap().is_some() {
+            exited_at = Some(Instant::now());
+        }
+        if exited_at.is_some_and(|t| t.elapsed() > Duration::from_millis(300)) {
+            return out;
+        }
+        if t0.elapsed() > limit {
+            let _ = child.kill();
+            panic!("the node did not finish within {limit:?}");
+        }
+    }
+}
+
+/// The angle between two headings, treating a row direction and its opposite alike.
+fn heading_err(a: f64, b: f64) -> f64 {
+    let d = (a - b).rem_euclid(std::f64::consts::PI);
+    d.min(std::f64::consts::PI - d)
+}
+
+/// Checks published heading and tilt against the ground truth carried in each estimate.
+fn check_against_truth(est: &[Estimate]) {
+    let ok: Vec<&Estimate> = est.iter().filter(|e| e.status == Status::Ok).collect();
+    assert!(
+        ok.len() * 10 >= est.len() * 8,
+        "at least 80% of the frames give an estimate ({} of {})",
+        ok.len(),
+        est.len()
+    );
+    for e in ok {
+        let t = e
+            .truth
+            .as_ref()
+            .expect("synthetic frames carry their ground truth");
+        let dh = heading_err(e.heading_rad.unwrap(), t.heading_rad).to_degrees();
+        let dt = (e.tilt_rad.unwrap() - t.tilt_rad).abs().to_degrees();
+        assert!(dh < 1.0, "seq {}: heading off by {dh:.3}°", e.seq);
+        assert!(dt < 1.0, "seq {}: tilt off by {dt:.3}°", e.seq);
+    }
+}
+
+/// The final "finished" log line's fields (JSON logs).
+fn finished_fields(stderr: &str) -> serde_json::Value {
+    stderr
+        .lines()
+        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+        .find(|v| v["fields"]["message"] == "finished")
+        .map(|v| v["fields"].clone())
+        .unwrap_or_else(|| panic!("no `finished` line in the log:\n{stderr}"))
+}
+
+fn sigterm(child: &Child) {
+    // SAFETY: sending a signal to our own child process.
+    let rc = unsafe { libc::kill(child.id() as i32, libc::SIGTERM) };
+    assert_eq!(rc, 0);
+}
+
+#[test]
+fn synthetic_drive_publishes_udp_estimates_matching_truth() {
+    let dir = tmpdir("synthetic");
+    let cfg = small_config(&dir, "");
+    let (sock, addr) = udp();
+    let mut child = bin()
+        .args([
+            "run",
+            "--frames",
+            "30",
+            "--no-print",
+            "--udp",
+            &addr,
+            "--config",
+        ])
+        .arg(&cfg)
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let est = collect(&sock, &mut child, Duration::from_secs(60));
+    let out = child.wait_with_output().unwrap();
+    assert!(out.status.success());
+    assert_eq!(est.len(), 30, "every frame published once");
+    for (i, e) in est.iter().enumerate() {
+        assert_eq!(e.seq, i as u64, "in frame order");
+        assert_eq!(e.schema_version, 1);
+        assert!(e.latency_ms >= e.detector_ms && e.latency_ms < 1000.0);
+        assert!(e.capture_ns > 0 && e.receive_ns >= e.capture_ns);
+    }
+    check_against_truth(&est);
+}
+
+#[test]
+fn record_replay_twice_identical_and_truncated_replay() {
+    let dir = tmpdir("replay");
+    let cfg = small_config(&dir, "");
+    let rec_dir = dir.join("rec");
+    let out = bin()
+        .args(["record", "--out"])
+        .arg(&rec_dir)
+        .args(["--frames", "12", "--no-print", "--config"])
+        .arg(&cfg)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let files: Vec<PathBuf> = std::fs::read_dir(&rec_dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert_eq!(files.len(), 1);
+    let file = &files[0];
+
+    let replay = |path: &Path| {
+        let (sock, addr) = udp();
+        let mut child = bin()
+            .args([
+                "run",
+                "--rate",
+                "max",
+                "--no-print",
+                "--udp",
+                &addr,
+                "--replay",
+            ])
+            .arg(path)
+            .args(["--config"])
+            .arg(&cfg)
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let est = collect(&sock, &mut child, Duration::from_secs(60));
+        let out = child.wait_with_output().unwrap();
+        assert!(out.status.success());
+        (est, String::from_utf8_lossy(&out.stderr).into_owned())
+    };
+    let (a, _) = replay(file);
+    let (b, _) = replay(file);
+    assert_eq!(a.len(), 12);
+    // Identical estimates, apart from the host's own clock.
+    let strip = |v: &[Estimate]| -> Vec<Estimate> {
+        v.iter()
+            .map(|e| Estimate {
+                receive_ns: 0,
+                publish_ns: 0,
+                latency_ms: 0.0,
+                detector_ms: 0.0,
+                ..e.clone()
+            })
+            .collect()
+    };
+    assert_eq!(strip(&a), strip(&b));
+    // The ground truth travelled through the recording.
+    check_against_truth(&a);
+
+    // Cut the recording at 60%: every complete frame before the cut, with a warning.
+    let bytes = std::fs::read(file).unwrap();
+    let cut = dir.join("cut.mcap");
+    std::fs::write(&cut, &bytes[..bytes.len() * 6 / 10]).unwrap();
+    let (c, log) = replay(&cut);
+    assert!(log.contains("recording cut short"), "{log}");
+    assert!(
+        c.len() >= 5 && c.len() < 12,
+        "{} frames before the cut",
+        c.len()
+    );
+    assert_eq!(strip(&c), strip(&a[..c.len()]));
+}
+
+#[test]
+fn slow_detector_drops_oldest_frames_and_counts_them() {
+    let dir = tmpdir("drops");
+    let cfg = small_config(&dir, "");
+    let rec_dir = dir.join("rec");
+    let st = bin()
+        .args(["record", "--out"])
+        .arg(&rec_dir)
+        .args(["--frames", "20", "--no-print", "--config"])
+        .arg(&cfg)
+        .stderr(Stdio::null())
+        .status()
+        .unwrap();
+    assert!(st.success());
+    let file = std::fs::read_dir(&rec_dir)
+        .unwrap()
+        .next()
+        .unwrap()
+        .unwrap()
+        .path();
+    // Replay at 50× the recorded rate into one worker behind a one-frame queue.
+    let (sock, addr) = udp();
+    let mut child = bin()
+        .args([
+            "run",
+            "--rate",
+            "50",
+            "--workers",
+            "1",
+            "--frame-queue",
+            "1",
+            "--no-print",
+        ])
+        .args(["--udp", &addr, "--replay"])
+        .arg(&file)
+        .arg("--config")
+        .arg(&cfg)
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let est = collect(&sock, &mut child, Duration::from_secs(60));
+    let out = child.wait_with_output().unwrap();
+    assert!(out.status.success());
+    let f = finished_fields(&String::from_utf8_lossy(&out.stderr));
+    let (fin, fout, dropped) = (
+        f["frames_in"].as_u64().unwrap(),
+        f["frames_out"].as_u64().unwrap(),
+        f["dropped"].as_u64().unwrap(),
+    );
+    assert_eq!(fin, 20);
+    assert!(
+        dropped > 0,
+        "frames arrive faster than one worker detects: {f}"
+    );
+    assert_eq!(fout + dropped, fin);
+    assert_eq!(est.len() as u64, fout);
+    // The newest frame always wins: the last frame is never the one dropped.
+    assert_eq!(est.last().unwrap().seq, 19);
+}
+
+fn http_get(addr: &str, path: &str) -> (u16, String, Vec<u8>) {
+    let mut s = TcpStream::connect(addr).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+    write!(
+        s,
+        "GET {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n"
+    )
+    .unwrap();
+    let mut buf = Vec::new();
+    s.read_to_end(&mut buf).unwrap();
+    let split = buf.windows(4).position(|w| w == b"\r\n\r\n").unwrap();
+    let head = String::from_utf8_lossy(&buf[..split]).into_owned();
+    let code = head.split_whitespace().nth(1).unwrap().parse().unwrap();
+    let body = buf[split + 4..].to_vec();
+    let len: usize = head
+        .lines()
+        .find_map(|l| l.strip_prefix("Content-Length: "))
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert_eq!(len, body.len());
+    (code, head, body)
+}
+
+#[test]
+fn http_endpoint_serves_health_metrics_and_overlay() {
+    let dir = tmpdir("http");
+    let port = TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let addr = format!("127.0.0.1:{port}");
+    let cfg = small_config(&dir, "");
+    let mut child = bin()
+        .args(["run", "--no-print", "--http", &addr, "--config"])
+        .arg(&cfg)
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    // Wait for the first frame to be published.
+    let t0 = Instant::now();
+    loop {
+        if TcpStream::connect(&addr).is_ok() {
+            let (code, _, body) = http_get(&addr, "/metrics");
+            assert_eq!(code, 200);
+            let text = String::from_utf8(body).unwrap();
+            if text.contains("omnirow_last_seq") {
+                break;
+            }
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(30),
+            "no frame within 30 s"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let (code, _, body) = http_get(&addr, "/healthz");
+    assert_eq!(code, 200);
+    let h: serde_json::Value = serde_json::from_slice(&body).unwrap();
+    assert_eq!(h["healthy"], true);
+    assert_eq!(h["source"], "streaming");
+
+    let (code, head, body) = http_get(&addr, "/metrics");
+    assert_eq!(code, 200);
+    assert!(head.contains("text/plain; version=0.0.4"));
+    let text = String::from_utf8(body).unwrap();
+    for m in [
+        "# TYPE omnirow_frames_in_total counter",
+        "omnirow_frames_dropped_total ",
+        "omnirow_detector_ms{quantile=\"0.99\"} ",
+        "omnirow_latency_ms{quantile=\"0.5\"} ",
+        "omnirow_source_state{state=\"streaming\"} 1",
+        "omnirow_pipeline_alive 1",
+    ] {
+        assert!(text.contains(m), "missing `{m}` in\n{text}");
+    }
+    let frames_in: f64 = text
+        .lines()
+        .find_map(|l| l.strip_prefix("omnirow_frames_in_total "))
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert!(frames_in >= 1.0);
+
+    let (code, head, png) = http_get(&addr, "/overlay.png");
+    assert_eq!(code, 200);
+    assert!(head.contains("image/png"));
+    let img = image::load_from_memory(&png).unwrap().to_rgb8();
+    assert_eq!((img.width(), img.height()), (408, 342));
+    // Rows are drawn in red over the image.
+    assert!(img.pixels().any(|p| p.0 == [255, 32, 32]), "no row drawn");
+
+    assert_eq!(http_get(&addr, "/nope").0, 404);
+    sigterm(&child);
+    assert!(child.wait().unwrap().success());
+}
+
+#[test]
+fn systemd_notify_protocol() {
+    let dir = tmpdir("notify");
+    let sock_path = dir.join("notify.sock");
+    let server = UnixDatagram::bind(&sock_path).unwrap();
+    server
+        .set_read_timeout(Some(Duration::from_millis(200)))
+        .unwrap();
+    let cfg = small_config(&dir, "[publish]\nstatus_interval_s = 0.2\n");
+    let mut child = bin()
+        .args(["run", "--no-print", "--duration", "2.5", "--config"])
+        .arg(&cfg)
+        .env("NOTIFY_SOCKET", &sock_path)
+        .env("WATCHDOG_USEC", "400000")
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut msgs = Vec::new();
+    let mut buf = [0u8; 4096];
+    let t0 = Instant::now();
+    loop {
+        if let Ok(n) = server.recv(&mut buf) {
+            msgs.push(String::from_utf8_lossy(&buf[..n]).into_owned());
+            continue;
+        }
+        if child.try_wait().unwrap().is_some() {
+            break;
+        }
+        assert!(t0.elapsed() < Duration::from_secs(60));
+    }
+    assert!(child.wait().unwrap().success());
+    let first_ready = msgs
+        .iter()
+        .position(|m| m.starts_with("READY=1"))
+        .expect("READY=1");
+    assert_eq!(msgs.iter().filter(|m| m.starts_with("READY=1")).count(), 1);
+    let watchdogs = msgs.iter().filter(|m| *m == "WATCHDOG=1").count();
+    // 2.5 s at one WATCHDOG per 200 ms (half of WATCHDOG_USEC).
+    assert!(watchdogs >= 6, "{watchdogs} watchdog messages: {msgs:?}");
+    let status = msgs
+        .iter()
+        .find(|m| m.starts_with("STATUS=streaming"))
+        .expect("a STATUS with the state");
+    assert!(status.contains(" fps"), "{status}");
+    let stopping = msgs
+        .iter()
+        .position(|m| m.starts_with("STOPPING=1"))
+        .expect("STOPPING=1");
+    assert!(first_ready < stopping);
+    assert_eq!(
+        stopping,
+        msgs.len() - 1,
+        "STOPPING is the last message: {msgs:?}"
+    );
+}
+
+#[test]
+fn sigterm_stops_within_two_seconds_with_a_complete_recording() {
+    let dir = tmpdir("sigterm");
+    let cfg = small_config(&dir, "");
+    let rec_dir = dir.join("rec");
+    let (sock, addr) = udp();
+    let mut child = bin()
+        .args(["record", "--out"])
+        .arg(&rec_dir)
+        .args(["--no-print", "--udp", &addr, "--config"])
+        .arg(&cfg)
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Let it run until frames flow, then SIGTERM.
+    let mut buf = vec![0u8; 65536];
+    let mut published = Vec::new();
+    while published.len() < 10 {
+        if let Ok(n) = sock.recv(&mut buf) {
+            published.push(serde_json::from_slice::<Estimate>(&buf[..n]).unwrap());
+        }
+    }
+    sigterm(&child);
+    let t = Instant::now();
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break s;
+        }
+        if let Ok(n) = sock.recv(&mut buf) {
+            published.push(serde_json::from_slice::<Estimate>(&buf[..n]).unwrap());
+        }
+        assert!(
+            t.elapsed() < Duration::from_secs(2),
+            "no exit within 2 s of SIGTERM"
+        );
+    };
+    assert!(status.success(), "exit 0 after SIGTERM");
+    while let Ok(n) = sock.recv(&mut buf) {
+        published.push(serde_json::from_slice::<Estimate>(&buf[..n]).unwrap());
+    }
+    let mut stderr = String::new();
+    child
+        .stderr
+        .take()
+        .unwrap()
+        .read_to_string(&mut stderr)
+        .unwrap();
+    let f = finished_fields(&stderr);
+
+    // The recording is complete: summary present, every frame and estimate readable.
+    let file = std::fs::read_dir(&rec_dir)
+        .unwrap()
+        .next()
+        .unwrap()
+        .unwrap()
+        .path();
+    let bytes = std::fs::read(&file).unwrap();
+    let summary = mcap::Summary::read(&bytes)
+        .unwrap()
+        .expect("the MCAP summary was written");
+    let stats = summary.stats.expect("statistics in the summary");
+    let mut images = 0u64;
+    let mut estimates = Vec::new();
+    for m in mcap::MessageStream::new(&bytes).unwrap() {
+        let m = m.unwrap();
+        match m.channel.topic.as_str() {
+            "/omnirow/image_raw" => {
+                let img = omnirow::record::image_msg::decode_ros2_image(&m.data).unwrap();
+                assert_eq!((img.width, img.height), (408, 342));
+                assert_eq!(img.data.len(), 408 * 342);
+                images += 1;
+            }
+            "/omnirow/estimate" => {
+                estimates.push(serde_json::from_slice::<Estimate>(&m.data).unwrap())
+            }
+            _ => {}
+        }
+    }
+    assert!(stats.message_count >= images + estimates.len() as u64);
+    assert_eq!(
+        images,
+        f["frames_in"].as_u64().unwrap(),
+        "every frame recorded"
+    );
+    assert_eq!(f["record_dropped"].as_u64().unwrap(), 0);
+    // Every published estimate is in the recording, in order.
+    assert_eq!(estimates.len(), published.len());
+    for (r, p) in estimates.iter().zip(&published) {
+        assert_eq!((r.seq, r.heading_rad), (p.seq, p.heading_rad));
+    }
+}
