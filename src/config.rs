@@ -184,7 +184,9 @@ struct RawConfig {
     http: Option<RawHttp>,
     record: Option<RawRecord>,
     log: Option<RawLog>,
-    detector: Option<Spanned<DetectorOptions>>,
+    // Not `Spanned`: toml cannot span a table that only exists through its sub-tables
+    // (`[detector.hough]` alone), so problems are reported at the table's first header.
+    detector: Option<DetectorOptions>,
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -289,6 +291,20 @@ struct Check<'a> {
 impl Check<'_> {
     fn line(&self, offset: usize) -> usize {
         line_of(self.text, offset)
+    }
+
+    /// A problem in the table `table`, reported at the first line that names it.
+    fn bad_table(&mut self, key: &str, table: &str, message: impl Into<String>) {
+        let offset = self
+            .text
+            .find(&format!("[{table}"))
+            .or_else(|| self.text.find(table))
+            .unwrap_or(0);
+        self.problems.push(Problem {
+            line: self.line(offset),
+            key: key.into(),
+            message: message.into(),
+        });
     }
 
     fn bad<T>(&mut self, key: &str, v: &Spanned<T>, message: impl Into<String>) {
@@ -662,20 +678,19 @@ fn validate(raw: RawConfig, c: &mut Check) -> Config {
 
     let detector = match &raw.detector {
         None => DetectorOptions::default(),
-        Some(d) => {
-            let o = d.get_ref();
+        Some(o) => {
             let checks = [
                 o.hough.validate(),
                 o.mask.validate(),
                 o.vanishing.validate(),
             ];
             for e in checks.into_iter().filter_map(Result::err) {
-                c.bad("detector", d, e.to_string());
+                c.bad_table("detector", "detector", e.to_string());
             }
             if !(o.max_tilt_deg.is_finite() && (0.0..=45.0).contains(&o.max_tilt_deg)) {
-                c.bad(
+                c.bad_table(
                     "detector.max_tilt_deg",
-                    d,
+                    "detector",
                     format!("{} is out of range (0 ..= 45)", o.max_tilt_deg),
                 );
             }
