@@ -184,7 +184,7 @@ struct RawConfig {
     http: Option<RawHttp>,
     record: Option<RawRecord>,
     log: Option<RawLog>,
-    detector: Option<Spanned<DetectorOptions>>,
+    detector: Option<DetectorOptions>,
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -662,20 +662,31 @@ fn validate(raw: RawConfig, c: &mut Check) -> Config {
 
     let detector = match &raw.detector {
         None => DetectorOptions::default(),
-        Some(d) => {
-            let o = d.get_ref();
+        Some(o) => {
+            // Nested tables cannot carry positions: point at the first [detector…] header.
+            let line = c
+                .text
+                .lines()
+                .position(|l| l.trim_start().starts_with("[detector"))
+                .map_or(0, |i| i + 1);
+            let mut bad = |key: &str, message: String| {
+                c.problems.push(Problem {
+                    line,
+                    key: key.into(),
+                    message,
+                })
+            };
             let checks = [
                 o.hough.validate(),
                 o.mask.validate(),
                 o.vanishing.validate(),
             ];
             for e in checks.into_iter().filter_map(Result::err) {
-                c.bad("detector", d, e.to_string());
+                bad("detector", e.to_string());
             }
             if !(o.max_tilt_deg.is_finite() && (0.0..=45.0).contains(&o.max_tilt_deg)) {
-                c.bad(
+                bad(
                     "detector.max_tilt_deg",
-                    d,
                     format!("{} is out of range (0 ..= 45)", o.max_tilt_deg),
                 );
             }
