@@ -11,9 +11,9 @@ use omnirow::detect::mask::build_mask;
 use omnirow::detect::smooth::Gaussian;
 use omnirow::detect::threshold::keep_brightest;
 use omnirow::detect::vegetation::vegetation_image;
-use omnirow::detect::{Detection, Detector, DetectorOptions, GreyImage, Points};
+use omnirow::detect::{Detection, Detector, DetectorOptions, GreyImage, Method, Points};
 use omnirow::frame::{ImageView, PixelFormat};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 fn frames() -> (omnirow::camera::Calibration, Vec<u8>, Vec<u8>) {
     let cal = ideal_fisheye(2050, 2448);
@@ -38,14 +38,17 @@ fn frames() -> (omnirow::camera::Calibration, Vec<u8>, Vec<u8>) {
 
 fn bench(c: &mut Criterion) {
     let (cal, mono, bayer) = frames();
-    let opts = DetectorOptions::default();
+    let opts = DetectorOptions {
+        method: Method::Hough,
+        ..Default::default()
+    };
     for (name, format, data) in [
         ("mono8", PixelFormat::Mono8, &mono),
         ("bayer_rggb8", PixelFormat::BayerRggb8, &bayer),
     ] {
         let view = ImageView::new(2448, 2050, format, data).unwrap();
         let mut g = c.benchmark_group(format!("detector_{name}_2448x2050"));
-        g.sample_size(20).measurement_time(Duration::from_secs(4));
+        g.sample_size(10).measurement_time(Duration::from_secs(3));
         // Whole Hough path.
         let mut det = Detector::new(&cal, opts.clone()).unwrap();
         let mut out = Detection::default();
@@ -69,7 +72,7 @@ fn bench(c: &mut Criterion) {
             })
         });
         let work = cal.rescaled(2.0).unwrap();
-        let (mut mask, mut rays) = (Vec::new(), Vec::new());
+        let (mut mask, mut rays, mut solid) = (Vec::new(), Vec::new(), Vec::new());
         build_mask(
             &work,
             &opts.mask,
@@ -77,6 +80,7 @@ fn bench(c: &mut Criterion) {
             None,
             &mut mask,
             &mut rays,
+            &mut solid,
         )
         .unwrap();
         let mut kept = Vec::new();
@@ -99,6 +103,11 @@ fn bench(c: &mut Criterion) {
                     .unwrap()
             })
         });
+        let bands = hough.bands().to_vec();
+        let mut rows2 = rows.clone();
+        g.bench_function("refit", |b| {
+            b.iter(|| prep.refit(&mut rows2, &bands, None).unwrap())
+        });
         let mut vs = omnirow::detect::VanishingStage::new(&cal, &opts).unwrap();
         let mut d2 = Detection {
             rows: rows.clone(),
@@ -106,33 +115,87 @@ fn bench(c: &mut Criterion) {
         };
         g.bench_function("vanishing", |b| b.iter(|| vs.run(None, &mut d2).unwrap()));
         g.finish();
-        // Breakdown from the detector's own stage timer (median of 30 frames).
-        let times: Vec<_> = (0..30)
-            .map(|_| {
-                det.process(&view, &mut out).unwrap();
-                det.last_times()
-            })
-            .collect();
+        // Breakdown: the detector's own stage timer (wall clock, median of 30 frames) and
+        // this thread's CPU time per frame (/proc/thread-self/schedstat), which a busy
+        // machine does not inflate.
+        let mut times = Vec::new();
+        let cpu0 = thread_cpu_ns();
+        for _ in 0..30 {
+            det.process(&view, &mut out).unwrap();
+            times.push(det.last_times());
+        }
+        let cpu_ms = thread_cpu_ns()
+            .zip(cpu0)
+            .map(|(b, a)| (b - a) as f64 / 30.0 / 1e6);
         let med = |f: &dyn Fn(&omnirow::detect::detector::StageTimes) -> Duration| {
             let mut v: Vec<f64> = times.iter().map(|t| f(t).as_secs_f64() * 1e3).collect();
             v.sort_by(f64::total_cmp);
             v[v.len() / 2]
         };
-        let t0 = Instant::now();
-        det.process(&view, &mut out).unwrap();
-        let one = t0.elapsed();
         println!(
-            "{name} 2448x2050 breakdown (median ms): prepare {:.2}, hough {:.2}, vanishing {:.3}, total {:.2} (one more frame {:.2} ms); {} points, {} rows, VP {}",
+            "{name} 2448x2050 breakdown (median wall ms): prepare {:.2}, hough + refit {:.2}, vanishing {:.3}, total {:.2}; CPU per frame {}; {} points, {} rows, VP {}",
             med(&|t| t.prepare),
             med(&|t| t.hough),
             med(&|t| t.vanishing),
             med(&|t| t.total()),
-            one.as_secs_f64() * 1e3,
+            cpu_ms.map_or("unavailable".to_string(), |c| format!("{c:.2} ms")),
             det.points().rays.len(),
             out.rows.len(),
             if out.vanishing_point.is_some() { "found" } else { "none" },
         );
+        // Per-stage CPU time.
+        let stage_cpu = |label: &str, f: &mut dyn FnMut()| {
+            let a = thread_cpu_ns();
+            for _ in 0..20 {
+                f();
+            }
+            if let (Some(a), Some(b)) = (a, thread_cpu_ns()) {
+                println!(
+                    "  {name} {label}: {:.2} ms CPU",
+                    (b - a) as f64 / 20.0 / 1e6
+                );
+            }
+        };
+        stage_cpu("vegetation", &mut || {
+            vegetation_image(&view, &opts.vegetation, true, &mut veg).unwrap();
+        });
+        stage_cpu("smooth", &mut || {
+            gauss
+                .apply(&veg.data, veg.width, veg.height, &mut tmp, &mut sm.data)
+                .unwrap();
+        });
+        stage_cpu("threshold", &mut || {
+            keep_brightest(&sm.data, &mask, &opts.threshold, &mut kept).unwrap();
+        });
+        stage_cpu("prepare", &mut || {
+            prep.run(&view, &mut points).unwrap();
+        });
+        stage_cpu("hough", &mut || {
+            rows.clear();
+            hough
+                .find_rows(&points.rays, &points.weights, &mut rows)
+                .unwrap();
+        });
+        stage_cpu("refit", &mut || {
+            prep.refit(&mut rows2, &bands, None).unwrap();
+        });
+        stage_cpu("vanishing", &mut || {
+            vs.run(None, &mut d2).unwrap();
+        });
+        stage_cpu("whole", &mut || {
+            det.process(&view, &mut out).unwrap();
+        });
     }
+}
+
+/// CPU time of the calling thread, nanoseconds (Linux).
+fn thread_cpu_ns() -> Option<u64> {
+    std::fs::read_to_string("/proc/thread-self/schedstat")
+        .ok()?
+        .split_whitespace()
+        .next()?
+        .parse()
+        .ok()
 }
 
 criterion_group!(benches, bench);

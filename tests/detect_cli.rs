@@ -134,7 +134,8 @@ fn contract_fields_order_errors_and_rescaling() {
     for (line, truth) in [(&lines[0], &a), (&lines[2], &b)] {
         let obj = line.as_object().unwrap();
         assert_eq!(obj.keys().len(), keys.len());
-        assert_eq!(line["method"], "hough");
+        // combined is the default method
+        assert_eq!(line["method"], "combined");
         let vp = vec3(&line["vanishing_point"]);
         assert!((vp.norm() - 1.0).abs() < 1e-9);
         let err = axis_angle(&vp, &truth.vp);
@@ -143,8 +144,14 @@ fn contract_fields_order_errors_and_rescaling() {
         assert!((line["tilt_rad"].as_f64().unwrap() - truth.tilt_rad).abs() < 3e-3);
         let rows = line["rows"].as_array().unwrap();
         assert!(rows.len() >= 3, "{line}");
+        for method in ["hough", "edge"] {
+            assert!(
+                rows.iter().any(|r| r["method"] == method),
+                "no {method} row: {line}"
+            );
+        }
         for r in rows {
-            assert_eq!(r["method"], "hough");
+            assert!(r["method"] == "hough" || r["method"] == "edge", "{r}");
             assert!(r["support"].as_u64().unwrap() > 0);
             assert!((vec3(&r["normal"]).norm() - 1.0).abs() < 1e-9);
         }
@@ -216,7 +223,7 @@ fn pal_lens_mask_radius_override_and_methods() {
         .as_str()
         .unwrap()
         .contains("field of view"));
-    // bad --mask-radius and unavailable methods are usage errors
+    // bad --mask-radius is a usage error
     let out = Command::new(env!("CARGO_BIN_EXE_omnirow"))
         .args([
             "detect",
@@ -229,24 +236,37 @@ fn pal_lens_mask_radius_override_and_methods() {
         .output()
         .unwrap();
     assert!(!out.status.success());
-    for m in ["edge", "combined"] {
-        let out = Command::new(env!("CARGO_BIN_EXE_omnirow"))
-            .args([
-                "detect",
-                "--calib",
-                calib.to_str().unwrap(),
-                "--method",
-                m,
-                p.to_str().unwrap(),
-            ])
-            .output()
-            .unwrap();
-        assert!(!out.status.success());
-        let e = String::from_utf8_lossy(&out.stderr);
-        assert!(
-            e.contains(&format!("method {m} is not available yet")),
-            "{e}"
-        );
+    // every method finds the vanishing point; rows carry their method's name
+    for m in ["hough", "edge", "combined"] {
+        let (code, lines, stderr) = run(&[
+            "detect",
+            "--calib",
+            calib.to_str().unwrap(),
+            "--mask-radius",
+            &radii,
+            "--method",
+            m,
+            p.to_str().unwrap(),
+        ]);
+        assert_eq!(code, 0, "{stderr}");
+        assert_eq!(lines[0]["method"], m);
+        let err = axis_angle(&vec3(&lines[0]["vanishing_point"]), &r.vp);
+        assert!(err < 2e-3, "{m}: {err}: {}", lines[0]);
+        let rows = lines[0]["rows"].as_array().unwrap();
+        let want: &[&str] = match m {
+            "combined" => &["hough", "edge"],
+            one => &[one],
+        };
+        for w in want {
+            assert!(
+                rows.iter().any(|row| row["method"] == *w),
+                "{m}: {}",
+                lines[0]
+            );
+        }
+        assert!(rows
+            .iter()
+            .all(|row| want.contains(&row["method"].as_str().unwrap())));
     }
 }
 

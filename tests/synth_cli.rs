@@ -109,6 +109,51 @@ fn same_seed_same_image_and_random_protocols() {
 }
 
 #[test]
+fn options_file_and_small_built_in_lens() {
+    let dir = tmp_dir("opts");
+    let opts = dir.join("scene.toml");
+    std::fs::write(
+        &opts,
+        "yaw_deg = 7.5\nleaf_length_m = 0.05\nstyle = \"colour\"\n",
+    )
+    .unwrap();
+    let png = dir.join("s.png");
+    let json = dir.join("s.json");
+    let out = bin()
+        .args([
+            "synth",
+            "--lens",
+            "pal",
+            "--image-height",
+            "200",
+            "--image-width",
+            "240",
+        ])
+        .args(["--pitch-deg", "2", "--options"])
+        .arg(&opts)
+        .arg("--out")
+        .arg(&png)
+        .arg("--truth")
+        .arg(&json)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let img = image::open(&png).unwrap();
+    assert_eq!(
+        (img.width(), img.height(), img.color().channel_count()),
+        (240, 200, 3)
+    );
+    let t: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert!((t["yaw_rad"].as_f64().unwrap() - 7.5f64.to_radians()).abs() < 1e-12);
+    assert!((t["pitch_rad"].as_f64().unwrap() - 2f64.to_radians()).abs() < 1e-12);
+}
+
+#[test]
 fn bad_arguments_fail_clearly() {
     let dir = tmp_dir("bad");
     let png = dir.join("x.png");
@@ -141,6 +186,29 @@ fn bad_arguments_fail_clearly() {
         .unwrap();
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains(".png"));
+    // an options file with an unknown key names the file and the key
+    let opts = dir.join("bad.toml");
+    std::fs::write(&opts, "leaf_length_m = 0.05\nyaw = 3\n").unwrap();
+    let out = bin()
+        .args([
+            "synth",
+            "--image-height",
+            "64",
+            "--image-width",
+            "80",
+            "--options",
+        ])
+        .arg(&opts)
+        .arg("--out")
+        .arg(&png)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        stderr.contains("bad.toml") && stderr.contains("yaw"),
+        "{stderr}"
+    );
     // missing --out
     let out = bin().args(["synth"]).output().unwrap();
     assert!(!out.status.success());

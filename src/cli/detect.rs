@@ -21,7 +21,7 @@ pub struct DetectArgs {
     #[arg(long, value_name = "FILE")]
     pub calib: PathBuf,
     /// Row-detection method.
-    #[arg(long, value_enum, default_value_t = MethodArg::Hough)]
+    #[arg(long, value_enum, default_value_t = MethodArg::Combined)]
     pub method: MethodArg,
     /// Field-of-view mask radii MIN,MAX in pixels of the calibration's own resolution
     /// (overrides the calibration's mask).

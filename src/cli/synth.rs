@@ -17,12 +17,23 @@ pub struct SynthArgs {
     /// Calibration to render through (OCamCalib calib_results.txt or omnirow TOML).
     #[arg(long, conflicts_with = "lens")]
     calib: Option<PathBuf>,
-    /// Built-in ideal lens for the GC2450C's 2448x2050 sensor (when no --calib).
+    /// Built-in ideal lens (when no --calib), for the GC2450C's 2448x2050 sensor unless
+    /// --image-height/--image-width say otherwise.
     #[arg(long, value_enum)]
     lens: Option<LensArg>,
+    /// Image height of the built-in lens, pixels (the lens's image circle fits it).
+    #[arg(long, default_value_t = SENSOR.0, conflicts_with = "calib")]
+    image_height: u32,
+    /// Image width of the built-in lens, pixels.
+    #[arg(long, default_value_t = SENSOR.1, conflicts_with = "calib")]
+    image_width: u32,
     /// Seed of every random quantity (plant errors, weeds, noise, texture, --random).
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// Scene settings from a TOML file (keys of SynthOptions, e.g. `leaf_length_m = 0.05`;
+    /// unknown keys are errors). Options given on the command line override it.
+    #[arg(long, conflicts_with = "random")]
+    options: Option<PathBuf>,
     /// Draw the scene settings at random as in one of the paper's tests (explicit options
     /// below override what it draws).
     #[arg(long, value_enum)]
@@ -103,10 +114,11 @@ pub fn run(args: SynthArgs) -> anyhow::Result<ExitCode> {
         Some(path) => (Calibration::load(path)?, path.display().to_string()),
         None => {
             let lens = IdealLens::from(args.lens.unwrap_or(LensArg::Fisheye185));
-            (
-                lens.calibration(SENSOR.0, SENSOR.1),
-                lens.name().to_string(),
-            )
+            let (h, w) = (args.image_height, args.image_width);
+            if !(16..=20_000).contains(&h) || !(16..=20_000).contains(&w) {
+                bail!("--image-height {h} --image-width {w}: each must be 16..=20000 pixels");
+            }
+            (lens.calibration(h, w), lens.name().to_string())
         }
     };
     let cal = if args.scale != 1.0 {
@@ -118,7 +130,15 @@ pub fn run(args: SynthArgs) -> anyhow::Result<ExitCode> {
     let mut opts = match args.random {
         Some(ProtocolArg::Table1) => random_scene(args.seed, Protocol::Table1),
         Some(ProtocolArg::Table2) => random_scene(args.seed, Protocol::Table2),
-        None => SynthOptions::default(),
+        None => match &args.options {
+            Some(path) => {
+                let text = std::fs::read_to_string(path)
+                    .with_context(|| format!("reading {}", path.display()))?;
+                toml::from_str::<SynthOptions>(&text)
+                    .map_err(|e| anyhow::anyhow!("{}: {}", path.display(), e))?
+            }
+            None => SynthOptions::default(),
+        },
     };
     let set = |slot: &mut f64, v: Option<f64>| {
         if let Some(v) = v {
@@ -150,9 +170,11 @@ pub fn run(args: SynthArgs) -> anyhow::Result<ExitCode> {
     let scene = Scene::new(&opts, args.seed, &cal.mounting)?;
     let mut renderer = Renderer::new(&cal)?;
     let t1 = Instant::now();
+    let cpu0 = process_cpu_s();
     let mut data = vec![0u8; renderer.buffer_len(opts.style)];
     renderer.render_into(&scene, &mut data)?;
     let t2 = Instant::now();
+    let cpu_render = process_cpu_s().zip(cpu0).map(|(b, a)| b - a);
     let truth = crate::synth::GroundTruth::of_scene(&scene, &cal);
     let (w, h) = renderer.size();
     let colour = match opts.style {
@@ -166,7 +188,7 @@ pub fn run(args: SynthArgs) -> anyhow::Result<ExitCode> {
         std::fs::write(path, json + "\n").with_context(|| format!("writing {}", path.display()))?;
     }
     eprintln!(
-        "synth: {lens_name} {w}x{h} {:?} seed {} yaw {:.2} pitch {:.2} roll {:.2} deg, heading {:.3} tilt {:.3} deg, {} rows listed; setup {:.0} ms, render {:.0} ms -> {}",
+        "synth: {lens_name} {w}x{h} {:?} seed {} yaw {:.2} pitch {:.2} roll {:.2} deg, heading {:.3} tilt {:.3} deg, {} rows listed; setup {:.0} ms, render {:.0} ms{} -> {}",
         opts.style,
         args.seed,
         opts.yaw_deg,
@@ -177,7 +199,23 @@ pub fn run(args: SynthArgs) -> anyhow::Result<ExitCode> {
         truth.row_normals.len(),
         (t1 - t0).as_secs_f64() * 1e3,
         (t2 - t1).as_secs_f64() * 1e3,
+        cpu_render
+            .map(|c| format!(" ({:.0} ms CPU)", c * 1e3))
+            .unwrap_or_default(),
         args.out.display()
     );
     Ok(ExitCode::SUCCESS)
+}
+
+/// CPU time (user + system) this process has used, seconds, where the OS tells (Linux).
+fn process_cpu_s() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // Fields after the command name (which is in parentheses and may hold spaces).
+    let rest = &stat[stat.rfind(')')? + 2..];
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    // utime and stime are fields 14 and 15 of the whole line, i.e. 11 and 12 here, in
+    // clock ticks of USER_HZ (100 on Linux).
+    let utime: f64 = f.get(11)?.parse().ok()?;
+    let stime: f64 = f.get(12)?.parse().ok()?;
+    Some((utime + stime) / 100.0)
 }

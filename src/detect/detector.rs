@@ -3,19 +3,24 @@
 //! Owns every buffer the stages need and the per-image-size setup (the calibration rescaled
 //! to the image, the field-of-view mask found from the image when the calibration has none,
 //! the mask and the per-pixel ray table), rebuilt only when the image's size or pixel format
-//! changes. The hot path allocates nothing once warmed up. The three stages are separate
-//! types so that a pipeline can run them on threads: [`Preparer`] (vegetation, smoothing,
-//! threshold → [`Points`]), [`HoughRows`] (points → rows) and [`VanishingStage`] (rows →
-//! vanishing point, heading, tilt, quality). [`Detector`] runs them in order.
+//! changes. The hot path allocates nothing once warmed up. The stages are separate types so
+//! that a pipeline can run them on threads: [`Preparer`] (vegetation, smoothing, threshold →
+//! [`Points`]), [`HoughRows`] (points → rows), [`EdgeDetector`] (smoothed vegetation image →
+//! rows, paper II-C) and [`VanishingStage`] (rows → vanishing point, heading, tilt, quality).
+//! [`Detector`] runs them in order for the chosen method: Hough, edge, or both combined
+//! (paper II-F, eq. 5: edge rows weighted w·support, Hough rows (1−w)·support, in one
+//! vanishing-point Hough).
 
+use super::edge::{EdgeDetector, EdgeError, EdgeOptions, EdgeResult};
 use super::hough::{HoughOptions, HoughResult, HoughRows};
 use super::mask::{build_mask, find_fov, MaskOptions, MaskResult};
 use super::pose::heading_tilt;
+use super::refit::{refit_rows, RefitImage, RefitOptions, Tiles};
 use super::smooth::{Gaussian, SmoothOptions};
 use super::threshold::{keep_brightest, ThresholdOptions, ThresholdResult};
 use super::vanishing::{VanishingFinder, VanishingOptions, VanishingResult};
 use super::vegetation::{vegetation_image, working_factor, VegetationOptions};
-use super::{DetectError, Detection, GreyImage, Method};
+use super::{DetectError, Detection, GreyImage, Method, Row};
 use crate::camera::{Calibration, FovMask};
 use crate::frame::{ImageView, PixelFormat};
 use nalgebra::Vector3;
@@ -48,13 +53,33 @@ pub struct DetectorOptions {
     pub smooth: SmoothOptions,
     pub threshold: ThresholdOptions,
     pub hough: HoughOptions,
+    pub refit: RefitOptions,
+    /// The edge method; it reads the detector's smoothed vegetation image at the working
+    /// resolution (so by default it neither smooths again nor downsamples).
+    pub edge: EdgeOptions,
+    pub combined: CombinedOptions,
     pub vanishing: VanishingOptions,
+}
+
+/// Options of the combined method (paper II-F).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CombinedOptions {
+    /// The paper's w (eq. 5): edge rows vote for the vanishing point with w·support, Hough
+    /// rows with (1−w)·support. Within (0, 1); default 0.7 as in the paper.
+    pub edge_weight: f64,
+}
+
+impl Default for CombinedOptions {
+    fn default() -> Self {
+        CombinedOptions { edge_weight: 0.7 }
+    }
 }
 
 impl Default for DetectorOptions {
     fn default() -> Self {
         DetectorOptions {
-            method: Method::Hough,
+            method: Method::Combined,
             max_tilt_deg: 15.0,
             binning: Binning::Auto,
             auto_bin_above_px: 1_600_000,
@@ -63,13 +88,27 @@ impl Default for DetectorOptions {
             smooth: SmoothOptions::default(),
             threshold: ThresholdOptions::default(),
             hough: HoughOptions::default(),
+            refit: RefitOptions::default(),
+            edge: EdgeOptions::default(),
+            combined: CombinedOptions::default(),
             vanishing: VanishingOptions::default(),
         }
     }
 }
 
+impl From<EdgeError> for DetectError {
+    fn from(e: EdgeError) -> Self {
+        match e {
+            EdgeError::Options(m) => DetectError::Options(format!("edge.{m}")),
+            EdgeError::Calibration(m) => DetectError::Calibration(m),
+            other => DetectError::Buffer(other.to_string()),
+        }
+    }
+}
+
 /// The kept points handed from [`Preparer`] to [`HoughRows`]: unit rays (camera frame) and
-/// their weights (smoothed vegetation value).
+/// their weights (smoothed vegetation value times the pixel's solid angle, so that fits are
+/// integrals over the sphere, free of the lens's varying pixel density).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Points {
     pub rays: Vec<[f32; 3]>,
@@ -98,6 +137,9 @@ struct Setup {
     work_cal: Calibration,
     mask: Vec<u8>,
     rays: Vec<[f32; 3]>,
+    solid: Vec<f32>,
+    tiles: Tiles,
+    pixel_angle: f64,
     mask_result: MaskResult,
 }
 
@@ -113,13 +155,15 @@ pub struct Preparer {
     setup: Option<Setup>,
     veg: GreyImage,
     smoothed: GreyImage,
-    tmp: Vec<u16>,
+    tmp: Vec<u8>,
     kept: Vec<u32>,
+    last_threshold: ThresholdResult,
 }
 
 impl Preparer {
     pub fn new(cal: &Calibration, opts: &DetectorOptions) -> Result<Self, DetectError> {
         opts.mask.validate()?;
+        opts.refit.validate()?;
         if !(opts.max_tilt_deg > 0.0 && opts.max_tilt_deg <= 80.0) {
             return Err(DetectError::Options(format!(
                 "max_tilt_deg = {} must be within (0, 80]",
@@ -140,6 +184,7 @@ impl Preparer {
             smoothed: GreyImage::default(),
             tmp: Vec::new(),
             kept: Vec::new(),
+            last_threshold: ThresholdResult::default(),
         })
     }
 
@@ -247,6 +292,7 @@ impl Preparer {
         };
         let mut mask = Vec::new();
         let mut rays = Vec::new();
+        let mut solid = Vec::new();
         let mask_result = build_mask(
             &work_cal,
             &self.opts.mask,
@@ -254,8 +300,19 @@ impl Preparer {
             self.user_mask.as_ref(),
             &mut mask,
             &mut rays,
+            &mut solid,
         )?;
         let n = mask.len();
+        let (ww, wh) = (
+            work_cal.model.width as usize,
+            work_cal.model.height as usize,
+        );
+        let tiles = Tiles::new(&mask, &rays, ww, wh, 16);
+        let m = &work_cal.model;
+        let pixel_angle = crate::sphere::axis_angle(
+            &m.cam2world(m.xc, m.yc + 0.5),
+            &m.cam2world(m.xc, m.yc - 0.5),
+        );
         self.veg.resize(
             work_cal.model.width as usize,
             work_cal.model.height as usize,
@@ -283,6 +340,9 @@ impl Preparer {
             work_cal,
             mask,
             rays,
+            solid,
+            tiles,
+            pixel_angle,
             mask_result,
         });
         Ok(true)
@@ -306,17 +366,60 @@ impl Preparer {
             &self.opts.threshold,
             &mut self.kept,
         )?;
+        self.last_threshold = thr;
         points.rays.clear();
         points.weights.clear();
         for &i in &self.kept {
             points.rays.push(s.rays[i as usize]);
-            points.weights.push(self.smoothed.data[i as usize] as f32);
+            let i = i as usize;
+            points
+                .weights
+                .push(self.smoothed.data[i] as f32 * s.solid[i]);
         }
         Ok(PrepareResult {
             threshold: thr,
             working_factor: s.factor,
             setup_rebuilt: rebuilt,
         })
+    }
+}
+
+impl Preparer {
+    /// Refits rows (with the Hough bands they were fitted in) on every pixel of the last
+    /// image near them, weighted by intensity above the background (see [`super::refit`]).
+    /// Returns the number of rows refitted.
+    /// With the rows' vanishing point `vp`, also removes each row's perspective bias.
+    pub fn refit(
+        &self,
+        rows: &mut [Row],
+        bands: &[f64],
+        vp: Option<&Vector3<f64>>,
+    ) -> Result<usize, DetectError> {
+        let Some(s) = &self.setup else {
+            return Ok(0);
+        };
+        if !self.opts.refit.enabled {
+            return Ok(0);
+        }
+        let t = &self.last_threshold;
+        let bg = t.median as f64
+            + self.opts.refit.background_fraction * (t.level as f64 - t.median as f64).max(0.0);
+        let img = RefitImage {
+            values: &self.smoothed.data,
+            mask: &s.mask,
+            rays: &s.rays,
+            solid: &s.solid,
+            tiles: &s.tiles,
+            pixel_angle: s.pixel_angle,
+        };
+        refit_rows(
+            &img,
+            bg.round().clamp(0.0, 254.0) as u8,
+            rows,
+            bands,
+            vp,
+            &self.opts.refit,
+        )
     }
 }
 
@@ -379,18 +482,23 @@ impl VanishingStage {
 /// Time spent in each stage of the last image.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct StageTimes {
+    /// Vegetation, smoothing, threshold.
     pub prepare: Duration,
+    /// Hough rows and their refit on the image.
     pub hough: Duration,
+    /// The edge method (Canny, chains, sections, merging).
+    pub edge: Duration,
+    /// Vanishing point, heading and tilt (and the optional perspective refit).
     pub vanishing: Duration,
 }
 
 impl StageTimes {
     pub fn total(&self) -> Duration {
-        self.prepare + self.hough + self.vanishing
+        self.prepare + self.hough + self.edge + self.vanishing
     }
 }
 
-/// The whole detector (Hough method).
+/// The whole detector (Hough, edge or combined method).
 #[derive(Debug, Clone)]
 pub struct Detector {
     opts: DetectorOptions,
@@ -398,18 +506,27 @@ pub struct Detector {
     hough: HoughRows,
     vanish: VanishingStage,
     points: Points,
+    /// The edge method, set up for the working image size (built at the first image and
+    /// again whenever the preparer's setup is rebuilt).
+    edge: Option<EdgeDetector>,
+    edge_rows: Vec<Row>,
+    weights: Vec<f64>,
     times: StageTimes,
     last_prepare: PrepareResult,
     last_hough: HoughResult,
+    last_edge: EdgeResult,
 }
 
 impl Detector {
     pub fn new(cal: &Calibration, opts: DetectorOptions) -> Result<Self, DetectError> {
-        match opts.method {
-            Method::Hough => {}
-            // The edge and combined methods are being built in src/detect/edge/.
-            other => return Err(DetectError::MethodUnavailable(other.name())),
+        let w = opts.combined.edge_weight;
+        if !(w > 0.0 && w < 1.0) {
+            return Err(DetectError::Options(format!(
+                "combined.edge_weight = {w} must be within (0, 1)"
+            )));
         }
+        // Check the edge options now rather than at the first image.
+        opts.edge.validate()?;
         Ok(Detector {
             prep: Preparer::new(cal, &opts)?,
             hough: HoughRows::new(opts.hough)?,
@@ -419,9 +536,13 @@ impl Detector {
                 weights: Vec::with_capacity(opts.threshold.target_points + 1),
             },
             opts,
+            edge: None,
+            edge_rows: Vec::with_capacity(64),
+            weights: Vec::with_capacity(128),
             times: StageTimes::default(),
             last_prepare: PrepareResult::default(),
             last_hough: HoughResult::default(),
+            last_edge: EdgeResult::default(),
         })
     }
 
@@ -431,21 +552,85 @@ impl Detector {
 
     /// Detects rows, the vanishing point, heading and tilt in one image, into `out`.
     pub fn process(&mut self, view: &ImageView, out: &mut Detection) -> Result<(), DetectError> {
+        let method = self.opts.method;
         let t0 = Instant::now();
         self.last_prepare = self.prep.run(view, &mut self.points)?;
         let t1 = Instant::now();
         out.rows.clear();
-        self.last_hough =
-            self.hough
-                .find_rows(&self.points.rays, &self.points.weights, &mut out.rows)?;
+        self.last_hough = HoughResult::default();
+        if method != Method::Edge {
+            self.last_hough =
+                self.hough
+                    .find_rows(&self.points.rays, &self.points.weights, &mut out.rows)?;
+            self.prep.refit(&mut out.rows, self.hough.bands(), None)?;
+        }
+        let n_hough = out.rows.len();
         let t2 = Instant::now();
-        self.vanish.run(None, out)?;
+        self.edge_rows.clear();
+        self.last_edge = EdgeResult::default();
+        if method != Method::Hough {
+            self.run_edge()?;
+        }
         let t3 = Instant::now();
+        // Eq. 5: edge rows weigh w·support, Hough rows (1−w)·support. A single method's
+        // rows weigh their support.
+        let (hough_w, edge_w) = match method {
+            Method::Combined => {
+                let w = self.opts.combined.edge_weight;
+                (1.0 - w, w)
+            }
+            _ => (1.0, 1.0),
+        };
+        self.weights.clear();
+        for r in out.rows.iter() {
+            self.weights.push(hough_w * r.support as f64);
+        }
+        for r in &self.edge_rows {
+            self.weights.push(edge_w * r.support as f64);
+            out.rows.push(*r);
+        }
+        self.vanish.run(Some(&self.weights), out)?;
+        if self.opts.refit.perspective && n_hough > 0 {
+            if let Some(vp) = out.vanishing_point {
+                self.prep.refit(
+                    &mut out.rows[..n_hough],
+                    self.hough.bands(),
+                    Some(&vp.direction),
+                )?;
+                self.vanish.run(Some(&self.weights), out)?;
+            }
+        }
+        let t4 = Instant::now();
         self.times = StageTimes {
             prepare: t1 - t0,
             hough: t2 - t1,
-            vanishing: t3 - t2,
+            edge: t3 - t2,
+            vanishing: t4 - t3,
         };
+        Ok(())
+    }
+
+    /// Runs the edge method on the preparer's smoothed vegetation image and mask.
+    fn run_edge(&mut self) -> Result<(), DetectError> {
+        let (_, smoothed) = self.prep.vegetation();
+        let (w, h) = (smoothed.width, smoothed.height);
+        let (Some(cal), Some((mask, _))) = (self.prep.working_calibration(), self.prep.mask())
+        else {
+            return Err(DetectError::Buffer(
+                "edge method: the preparer has no setup".into(),
+            ));
+        };
+        let stale = match &self.edge {
+            None => true,
+            Some(e) => self.last_prepare.setup_rebuilt || e.size() != (w, h),
+        };
+        if stale {
+            self.edge = Some(EdgeDetector::new(cal, w, h, self.opts.edge)?);
+        }
+        let Some(edge) = self.edge.as_mut() else {
+            return Err(DetectError::Buffer("edge method: no setup".into()));
+        };
+        self.last_edge = edge.process(&smoothed.data, mask, &mut self.edge_rows)?;
         Ok(())
     }
 
@@ -487,6 +672,16 @@ impl Detector {
         self.last_hough
     }
 
+    /// What the edge method did on the last image (all zero when it did not run).
+    pub fn last_edge(&self) -> EdgeResult {
+        self.last_edge
+    }
+
+    /// The edge method's state after the last image (edges, chains, sections), if it ran.
+    pub fn edge(&self) -> Option<&EdgeDetector> {
+        self.edge.as_ref()
+    }
+
     /// The calibration at the last image's resolution.
     pub fn view_calibration(&self) -> Option<&Calibration> {
         self.prep.view_calibration()
@@ -515,20 +710,40 @@ mod tests {
     use crate::camera::ideal_fisheye;
 
     #[test]
-    fn edge_and_combined_say_not_available() {
+    fn combined_is_default_and_weight_is_checked() {
+        assert_eq!(DetectorOptions::default().method, Method::Combined);
         let cal = ideal_fisheye(100, 120);
-        for m in [Method::Edge, Method::Combined] {
+        for w in [0.0, 1.0, -0.5, f64::NAN] {
             let e = Detector::new(
                 &cal,
                 DetectorOptions {
-                    method: m,
+                    combined: CombinedOptions { edge_weight: w },
                     ..Default::default()
                 },
             )
             .unwrap_err()
             .to_string();
-            assert_eq!(e, format!("method {} is not available yet", m.name()));
+            assert!(e.contains("edge_weight"), "{e}");
         }
+        let o: DetectorOptions = toml::from_str(
+            "method = \"edge\"\n[edge.split]\ntolerance_px = 2.0\n[combined]\nedge_weight = 0.5\n",
+        )
+        .unwrap();
+        assert_eq!(o.method, Method::Edge);
+        assert_eq!(o.edge.split.tolerance_px, 2.0);
+        assert_eq!(o.combined.edge_weight, 0.5);
+        let bad = DetectorOptions {
+            edge: EdgeOptions {
+                split: crate::detect::edge::SplitOptions {
+                    tolerance_px: -1.0,
+                    ..Default::default()
+                },
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        let e = Detector::new(&cal, bad).unwrap_err().to_string();
+        assert!(e.contains("tolerance_px"), "{e}");
     }
 
     #[test]

@@ -56,7 +56,7 @@ impl Default for HoughOptions {
             min_support: 40,
             min_peak_fraction: 0.1,
             nms_radius: 2,
-            refine_iterations: 12,
+            refine_iterations: 6,
             min_tolerance_deg: 0.15,
             merge_angle_deg: 1.0,
             max_degeneracy: 0.2,
@@ -133,7 +133,14 @@ pub struct HoughRows {
     acc: Vec<u32>,
     peaks: Vec<(u32, u32)>,
     sel: Vec<u32>,
-    found: Vec<Row>,
+    /// Refined candidates with the half-width (radians) of their final band.
+    found: Vec<(Row, f64)>,
+    /// Per point: claimed by an accepted row.
+    owned: Vec<bool>,
+    /// Band half-widths (radians) of the rows appended by the last run, in their order.
+    bands: Vec<f64>,
+    /// Non-maximum-suppression window offsets, nearest first (most cells lose to a neighbour).
+    nms: Vec<(isize, isize)>,
 }
 
 /// atan2 for f32 with an error below 1e-5 rad (enough to pick a 2° cell), branch-light.
@@ -181,11 +188,28 @@ impl HoughRows {
             peaks: Vec::with_capacity(t * opts.phi_bins),
             sel: Vec::new(),
             found: Vec::with_capacity(4 * opts.max_rows),
+            owned: Vec::new(),
+            bands: Vec::with_capacity(opts.max_rows),
+            nms: {
+                let r = opts.nms_radius as isize;
+                let mut v: Vec<(isize, isize)> = (-r..=r)
+                    .flat_map(|a| (-r..=r).map(move |b| (a, b)))
+                    .filter(|&o| o != (0, 0))
+                    .collect();
+                v.sort_by_key(|&(a, b)| a * a + b * b);
+                v
+            },
         })
     }
 
     pub fn options(&self) -> &HoughOptions {
         &self.opts
+    }
+
+    /// Half-width (radians) of the band of points each row of the last run was fitted to,
+    /// in the order the rows were appended.
+    pub fn bands(&self) -> &[f64] {
+        &self.bands
     }
 
     /// The accumulator of the last run, column-major (θ column × φ cells).
@@ -267,7 +291,6 @@ impl HoughRows {
         let floor = (self.opts.min_support.max(1))
             .max((self.opts.min_peak_fraction * max as f64).ceil() as u32);
         self.peaks.clear();
-        let r = self.opts.nms_radius as isize;
         for k in 0..t {
             for j in 0..p {
                 let idx = k * p + j;
@@ -276,17 +299,12 @@ impl HoughRows {
                     continue;
                 }
                 let mut is_peak = true;
-                'nb: for dk in -r..=r {
-                    for dj in -r..=r {
-                        if dk == 0 && dj == 0 {
-                            continue;
-                        }
-                        let n = self.neighbour(k, j, dk, dj);
-                        let w = self.acc[n];
-                        if w > v || (w == v && n < idx) {
-                            is_peak = false;
-                            break 'nb;
-                        }
+                for &(dk, dj) in &self.nms {
+                    let n = self.neighbour(k, j, dk, dj);
+                    let w = self.acc[n];
+                    if w > v || (w == v && n < idx) {
+                        is_peak = false;
+                        break;
                     }
                 }
                 if is_peak {
@@ -296,13 +314,18 @@ impl HoughRows {
         }
         self.peaks
             .sort_unstable_by(|a, b| b.0.cmp(&a.0).then(a.1.cmp(&b.1)));
-        self.peaks.truncate(3 * self.opts.max_rows);
+        self.peaks.truncate(2 * self.opts.max_rows);
         max
     }
 
     /// Refines a peak's normal on the points near its great circle. Returns the row, or
     /// `None` when too few points support it or they do not define a great circle.
-    fn refine(&mut self, n0: Vector3<f64>, rays: &[[f32; 3]], weights: &[f32]) -> Option<Row> {
+    fn refine(
+        &mut self,
+        n0: Vector3<f64>,
+        rays: &[[f32; 3]],
+        weights: &[f32],
+    ) -> Option<(Row, f64)> {
         let cell = std::f64::consts::PI / self.opts.phi_bins.min(self.opts.theta_bins) as f64;
         let mut tol = 1.5 * cell;
         let min_tol = self.opts.min_tolerance_deg.to_radians();
@@ -338,7 +361,7 @@ impl HoughRows {
             fit = Some(f);
             let rms = f.mean_sq_residual.max(0.0).sqrt().asin();
             let next = (3.0 * rms).clamp(min_tol, tol);
-            if change < 1e-10 && (next - tol).abs() < 1e-12 {
+            if change < 1e-7 && (next - tol).abs() < 1e-9 {
                 break;
             }
             tol = next;
@@ -347,11 +370,14 @@ impl HoughRows {
         if support < self.opts.min_support || f.degeneracy > self.opts.max_degeneracy {
             return None;
         }
-        Some(Row {
-            normal: canonical(&n),
-            method: Method::Hough,
-            support,
-        })
+        Some((
+            Row {
+                normal: canonical(&n),
+                method: Method::Hough,
+                support,
+            },
+            tol,
+        ))
     }
 
     /// Finds rows among unit rays (camera frame) with per-point weights (used by the
@@ -382,19 +408,50 @@ impl HoughRows {
             }
         }
         self.found
-            .sort_unstable_by_key(|r| std::cmp::Reverse(r.support));
+            .sort_unstable_by_key(|r| std::cmp::Reverse(r.0.support));
+        // Accept rows strongest first; a candidate whose points mostly belong to rows already
+        // accepted (a great circle through a row's wide near part, or the same row again)
+        // is not a row of its own.
         let merge = self.opts.merge_angle_deg.to_radians();
         let start = rows.len();
-        for row in &self.found {
+        self.bands.clear();
+        self.owned.clear();
+        self.owned.resize(rays.len(), false);
+        for fi in 0..self.found.len() {
+            let (row, tol) = self.found[fi];
             if rows.len() - start >= self.opts.max_rows {
                 break;
             }
             if rows[start..]
                 .iter()
-                .all(|r| axis_angle(&r.normal, &row.normal) > merge)
+                .any(|r| axis_angle(&r.normal, &row.normal) <= merge)
             {
-                rows.push(*row);
+                continue;
             }
+            let s_tol = tol.sin() as f32;
+            let nf = [
+                row.normal.x as f32,
+                row.normal.y as f32,
+                row.normal.z as f32,
+            ];
+            let mut own = 0u32;
+            let mut all = 0u32;
+            for (r, &o) in rays.iter().zip(&self.owned) {
+                if (nf[0] * r[0] + nf[1] * r[1] + nf[2] * r[2]).abs() < s_tol {
+                    all += 1;
+                    own += (!o) as u32;
+                }
+            }
+            if own < self.opts.min_support || (own as f64) < 0.5 * all as f64 {
+                continue;
+            }
+            for (r, o) in rays.iter().zip(self.owned.iter_mut()) {
+                if (nf[0] * r[0] + nf[1] * r[1] + nf[2] * r[2]).abs() < s_tol {
+                    *o = true;
+                }
+            }
+            rows.push(row);
+            self.bands.push(tol);
         }
         Ok(HoughResult {
             points: rays.len(),

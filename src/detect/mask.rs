@@ -58,8 +58,11 @@ pub struct MaskResult {
 
 /// Builds the mask of a working image described by `cal` (its size, its field-of-view mask
 /// if any, its mounting; rays higher than `max_tilt_deg` above the robot's horizontal plane
-/// are sky) into `mask` (0xFF = use, 0 = ignore) and the unit ray of every
-/// pixel into `rays` (camera frame, f32; zero for masked pixels). Buffers are resized.
+/// are sky) into `mask` (0xFF = use, 0 = ignore), the unit ray of every
+/// pixel into `rays` (camera frame, f32; zero for masked pixels) and the solid angle each
+/// pixel covers into `solid` (relative to the image centre's pixel; zero for masked
+/// pixels), so that sums over pixels become integrals over the sphere whatever the lens's
+/// mapping. Buffers are resized.
 pub fn build_mask(
     cal: &Calibration,
     opts: &MaskOptions,
@@ -67,6 +70,7 @@ pub fn build_mask(
     user: Option<&GreyImage>,
     mask: &mut Vec<u8>,
     rays: &mut Vec<[f32; 3]>,
+    solid: &mut Vec<f32>,
 ) -> Result<MaskResult, DetectError> {
     opts.validate()?;
     if !(max_tilt_deg.is_finite() && (0.0..=80.0).contains(&max_tilt_deg)) {
@@ -94,6 +98,15 @@ pub fn build_mask(
     mask.resize(w * h, 0);
     rays.clear();
     rays.resize(w * h, [0.0; 3]);
+    solid.clear();
+    solid.resize(w * h, 0.0);
+    let model = &cal.model;
+    let omega = |r: f64, c: f64| -> f64 {
+        let dr = model.cam2world(r + 0.5, c) - model.cam2world(r - 0.5, c);
+        let dc = model.cam2world(r, c + 0.5) - model.cam2world(r, c - 0.5);
+        dr.cross(&dc).norm()
+    };
+    let omega0 = omega(model.xc, model.yc).max(1e-300);
     let rot = cal.mounting.robot_from_camera();
     let sin_tilt = max_tilt_deg.to_radians().sin();
     let (tlo, thi) = cal.model.theta_range();
@@ -134,6 +147,7 @@ pub fn build_mask(
             }
             mask[i] = 0xFF;
             rays[i] = [ray.x as f32, ray.y as f32, ray.z as f32];
+            solid[i] = (omega(r as f64, c as f64) / omega0) as f32;
             res.valid += 1;
         }
     }
@@ -304,6 +318,7 @@ mod tests {
         let cal = ideal_pal(100, 120);
         let mut mask = Vec::new();
         let mut rays = Vec::new();
+        let mut solid = Vec::new();
         let r = build_mask(
             &cal,
             &MaskOptions::default(),
@@ -311,6 +326,7 @@ mod tests {
             None,
             &mut mask,
             &mut rays,
+            &mut solid,
         )
         .unwrap();
         assert!(r.valid > 0);
@@ -342,6 +358,7 @@ mod tests {
             None,
             &mut mask,
             &mut rays,
+            &mut solid,
         )
         .unwrap();
         assert!(r2.sky > 0 && r2.valid < r.valid, "{r2:?} vs {r:?}");
@@ -368,6 +385,7 @@ mod tests {
         }
         let mut mask = Vec::new();
         let mut rays = Vec::new();
+        let mut solid = Vec::new();
         build_mask(
             &cal,
             &MaskOptions::default(),
@@ -375,6 +393,7 @@ mod tests {
             Some(&user),
             &mut mask,
             &mut rays,
+            &mut solid,
         )
         .unwrap();
         assert!(mask[..30 * 80].iter().all(|&m| m == 0));
@@ -388,7 +407,8 @@ mod tests {
             15.0,
             Some(&bad),
             &mut mask,
-            &mut rays
+            &mut rays,
+            &mut solid
         )
         .is_err());
     }

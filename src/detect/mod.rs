@@ -5,16 +5,18 @@
 //! [`Detector`] owns their buffers and runs them in order (prepare → Hough → vanishing point).
 
 pub mod detector;
+pub mod edge;
 pub mod hough;
 pub mod mask;
 pub mod overlay;
 pub mod pose;
+pub mod refit;
 pub mod smooth;
 pub mod threshold;
 pub mod vanishing;
 pub mod vegetation;
 
-pub use detector::{Detector, DetectorOptions, Points, Preparer, VanishingStage};
+pub use detector::{CombinedOptions, Detector, DetectorOptions, Points, Preparer, VanishingStage};
 
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
@@ -22,8 +24,6 @@ use serde::{Deserialize, Serialize};
 /// An error from a detector stage. Names what was wrong with which input.
 #[derive(Debug, thiserror::Error)]
 pub enum DetectError {
-    #[error("method {0} is not available yet")]
-    MethodUnavailable(&'static str),
     #[error("invalid detector option: {0}")]
     Options(String),
     #[error("image {height}x{width}: {problem}")]

@@ -18,7 +18,7 @@ pub struct SmoothOptions {
 
 impl Default for SmoothOptions {
     fn default() -> Self {
-        SmoothOptions { sigma_px: 1.0 }
+        SmoothOptions { sigma_px: 0.8 }
     }
 }
 
@@ -44,7 +44,7 @@ impl Gaussian {
                 radius: 0,
             });
         }
-        let radius = (3.0 * s).ceil() as usize;
+        let radius = (2.5 * s).ceil() as usize;
         let raw: Vec<f64> = (0..=2 * radius)
             .map(|i| {
                 let x = i as f64 - radius as f64;
@@ -67,14 +67,16 @@ impl Gaussian {
         self.radius
     }
 
-    /// Smooths `src` (width × height) into `dst` using `tmp` as the intermediate.
-    /// `tmp` is resized (allocating only when it grows); `dst` must have the size of `src`.
+    /// Smooths `src` (width × height) into `dst` using `tmp` as the intermediate (8-bit,
+    /// rounded). `tmp` is resized (allocating only when it grows); `dst` must have the size
+    /// of `src`. Both passes accumulate 16-bit sums tap by tap over runs of pixels, which the
+    /// compiler vectorises.
     pub fn apply(
         &self,
         src: &[u8],
         width: usize,
         height: usize,
-        tmp: &mut Vec<u16>,
+        tmp: &mut Vec<u8>,
         dst: &mut [u8],
     ) -> Result<(), DetectError> {
         let n = width * height;
@@ -91,15 +93,16 @@ impl Gaussian {
         }
         tmp.resize(n, 0);
         let r = self.radius;
-        let k = &self.kernel;
-        // Horizontal: u8 -> u16 (value * 256 at most 65280).
-        let border = |srow: &[u8], x: usize| -> u16 {
-            let mut acc = 0u32;
-            for (j, &kw) in k.iter().enumerate() {
+        let kw16 = |j: usize| self.kernel[j] as u16;
+        const CHUNK: usize = 256;
+        // Horizontal pass.
+        let border = |srow: &[u8], x: usize| -> u8 {
+            let mut acc = 128u32;
+            for (j, &kw) in self.kernel.iter().enumerate() {
                 let xx = (x as isize + j as isize - r as isize).clamp(0, width as isize - 1);
                 acc += kw * srow[xx as usize] as u32;
             }
-            acc as u16
+            (acc >> 8).min(255) as u8
         };
         for (srow, trow) in src.chunks_exact(width).zip(tmp.chunks_exact_mut(width)) {
             if width <= 2 * r {
@@ -114,35 +117,43 @@ impl Gaussian {
             for (x, t) in trow.iter_mut().enumerate().skip(width - r) {
                 *t = border(srow, x);
             }
-            for (t, win) in trow[r..width - r].iter_mut().zip(srow.windows(2 * r + 1)) {
-                let mut acc = 0u32;
-                for (&kw, &v) in k.iter().zip(win) {
-                    acc += kw * v as u32;
+            let mut x0 = r;
+            while x0 < width - r {
+                let len = CHUNK.min(width - r - x0);
+                let mut acc = [128u16; CHUNK];
+                let acc = &mut acc[..len];
+                for j in 0..=2 * r {
+                    let w = kw16(j);
+                    let s = &srow[x0 - r + j..x0 - r + j + len];
+                    for (a, &v) in acc.iter_mut().zip(s) {
+                        *a += w * v as u16;
+                    }
                 }
-                *t = acc as u16;
+                for (t, &a) in trow[x0..x0 + len].iter_mut().zip(acc.iter()) {
+                    *t = (a >> 8) as u8;
+                }
+                x0 += len;
             }
         }
-        // Vertical: u16 -> u8, rounding; rows accumulated whole so the loop vectorises.
+        // Vertical pass.
         for y in 0..height {
             let drow = &mut dst[y * width..(y + 1) * width];
-            // Accumulate in a u32 row held in the destination's place: do it in chunks.
-            const CHUNK: usize = 256;
-            let mut acc = [0u32; CHUNK];
             let mut x0 = 0;
             while x0 < width {
                 let len = CHUNK.min(width - x0);
+                let mut acc = [128u16; CHUNK];
                 let acc = &mut acc[..len];
-                acc.fill(128 * 256);
-                for (j, &kw) in k.iter().enumerate() {
+                for j in 0..=2 * r {
+                    let w = kw16(j);
                     let yy = (y as isize + j as isize - r as isize).clamp(0, height as isize - 1)
                         as usize;
                     let trow = &tmp[yy * width + x0..yy * width + x0 + len];
                     for (a, &t) in acc.iter_mut().zip(trow) {
-                        *a += kw * t as u32;
+                        *a += w * t as u16;
                     }
                 }
                 for (d, &a) in drow[x0..x0 + len].iter_mut().zip(acc.iter()) {
-                    *d = (a >> 16).min(255) as u8;
+                    *d = (a >> 8) as u8;
                 }
                 x0 += len;
             }
@@ -167,7 +178,7 @@ mod tests {
 
     #[test]
     fn impulse_spreads_symmetrically_and_keeps_mass() {
-        let g = Gaussian::new(&SmoothOptions { sigma_px: 1.0 }).unwrap();
+        let g = Gaussian::new(&SmoothOptions { sigma_px: 0.8 }).unwrap();
         let (w, h) = (15, 15);
         let mut src = vec![0u8; w * h];
         src[7 * w + 7] = 255;

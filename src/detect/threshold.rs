@@ -23,7 +23,7 @@ pub struct ThresholdOptions {
 impl Default for ThresholdOptions {
     fn default() -> Self {
         ThresholdOptions {
-            target_points: 12_000,
+            target_points: 5_000,
             min_level: 10,
         }
     }
@@ -39,6 +39,8 @@ pub struct ThresholdResult {
     pub kept: usize,
     /// Number of valid (unmasked) pixels above `min_level`.
     pub candidates: usize,
+    /// Median value of the valid pixels (the background, in a field image).
+    pub median: u8,
 }
 
 /// Chooses the level from the histogram of `image` over pixels whose `mask` byte is non-zero,
@@ -66,11 +68,40 @@ pub fn keep_brightest(
         return Err(DetectError::Buffer("threshold: image too large".into()));
     }
     out.clear();
-    let mut hist = [0u32; 256];
-    // Masked pixels land in bin 0 (mask bytes are 0 or 0xFF).
-    for (&v, &m) in image.iter().zip(mask) {
-        hist[(v & m) as usize] += 1;
+    // Masked pixels land in bin 0 (mask bytes are 0 or 0xFF). Four histograms interleaved
+    // so that runs of equal values do not serialise on one counter.
+    let mut hists = [[0u32; 256]; 4];
+    let mut chunks = image.chunks_exact(4).zip(mask.chunks_exact(4));
+    for (v, m) in &mut chunks {
+        hists[0][(v[0] & m[0]) as usize] += 1;
+        hists[1][(v[1] & m[1]) as usize] += 1;
+        hists[2][(v[2] & m[2]) as usize] += 1;
+        hists[3][(v[3] & m[3]) as usize] += 1;
     }
+    let tail = image.len() / 4 * 4;
+    for (&v, &m) in image[tail..].iter().zip(&mask[tail..]) {
+        hists[0][(v & m) as usize] += 1;
+    }
+    let mut hist = [0u32; 256];
+    for (i, h) in hist.iter_mut().enumerate() {
+        *h = hists[0][i] + hists[1][i] + hists[2][i] + hists[3][i];
+    }
+    let valid: u64 = mask.iter().map(|&m| (m & 1) as u64).sum();
+    // Median of the valid pixels: masked pixels sit in bin 0 with the valid zeros.
+    let median = {
+        let masked = image.len() as u64 - valid;
+        let mut acc = 0u64;
+        let half = masked + valid / 2;
+        let mut m = 0u8;
+        for (v, &c) in hist.iter().enumerate() {
+            acc += c as u64;
+            if acc > half {
+                m = v as u8;
+                break;
+            }
+        }
+        m
+    };
     let n = opts.target_points as u64;
     let mut above: u64 = 0; // pixels with value > level
     let mut level = 255usize;
@@ -99,15 +130,24 @@ pub fn keep_brightest(
     };
     let level_u8 = level.min(255) as u8;
     let mut count_at = 0u32;
-    for (i, (&v, &m)) in image.iter().zip(mask).enumerate() {
-        let v = v & m;
-        if v > level_u8 {
-            out.push(i as u32);
-        } else if v == level_u8 && level_u8 as usize >= lo {
-            if count_at % stride == 0 {
+    // Scan in blocks, skipping (with a vectorised maximum) blocks with nothing to keep.
+    const BLOCK: usize = 64;
+    for (b, (vb, mb)) in image.chunks(BLOCK).zip(mask.chunks(BLOCK)).enumerate() {
+        let max = vb.iter().zip(mb).fold(0u8, |a, (&v, &m)| a.max(v & m));
+        if max < level_u8 {
+            continue;
+        }
+        for (k, (&v, &m)) in vb.iter().zip(mb).enumerate() {
+            let v = v & m;
+            let i = b * BLOCK + k;
+            if v > level_u8 {
                 out.push(i as u32);
+            } else if v == level_u8 && level_u8 as usize >= lo {
+                if count_at % stride == 0 {
+                    out.push(i as u32);
+                }
+                count_at += 1;
             }
-            count_at += 1;
         }
     }
     Ok(ThresholdResult {
@@ -115,6 +155,7 @@ pub fn keep_brightest(
         stride,
         kept: out.len(),
         candidates: candidates as usize,
+        median,
     })
 }
 
@@ -137,6 +178,7 @@ mod tests {
         assert_eq!(r.kept, 10);
         assert_eq!(out, (245..255).collect::<Vec<u32>>());
         assert_eq!(r.level, 245);
+        assert_eq!(r.median, 127);
     }
 
     #[test]

@@ -168,6 +168,9 @@ impl WeedGrid {
 
     #[inline]
     fn candidates(&self, x: f64, y: f64) -> &[[f64; 2]] {
+        if self.items.is_empty() {
+            return &[];
+        }
         let fx = (x - self.origin[0]) / self.cell;
         let fy = (y - self.origin[1]) / self.cell;
         if !(fx >= 0.0 && fy >= 0.0 && fx < self.nx as f64 && fy < self.ny as f64) {
@@ -199,7 +202,8 @@ pub struct Field {
     window_x: f64,
     window_y: f64,
     weeds: WeedGrid,
-    weed_count: usize,
+    /// Weed stems (x, y), metres.
+    weed_list: Vec<[f64; 2]>,
 }
 
 /// Which plant, if any, covers a ground point.
@@ -230,20 +234,16 @@ impl Field {
             let n = ((row_max - row_min + 1) * (k_max - k_min + 1)) as usize;
             offsets.reserve_exact(n);
             let mut rng = Rng::stream(seed, 1);
-            let mut truncated = |sd: f64| -> f64 {
-                if sd == 0.0 {
-                    return 0.0;
-                }
-                loop {
-                    let z = rng.normal();
-                    if z.abs() <= TRUNCATE_SD {
-                        return z * sd;
-                    }
-                }
-            };
+            let (sx, sy) = (opts.along_sd_m, opts.across_sd_m);
             for _ in 0..n {
-                let ox = truncated(opts.along_sd_m) as f32;
-                let oy = truncated(opts.across_sd_m) as f32;
+                // A pair of standard normals, redrawn until both lie within the truncation.
+                let (zx, zy) = loop {
+                    let (a, b) = rng.normal_pair();
+                    if a.abs() <= TRUNCATE_SD && b.abs() <= TRUNCATE_SD {
+                        break (a, b);
+                    }
+                };
+                let (ox, oy) = ((zx * sx) as f32, (zy * sy) as f32);
                 max_x = max_x.max((ox as f64).abs());
                 max_y = max_y.max((oy as f64).abs());
                 offsets.push([ox, oy]);
@@ -274,7 +274,7 @@ impl Field {
             window_x: reach + max_x + 1e-9,
             window_y: reach + max_y + 1e-9,
             weeds: WeedGrid::new(&weeds, camera_xy, half, reach),
-            weed_count: weeds.len(),
+            weed_list: weeds,
         }
     }
 
@@ -300,8 +300,9 @@ impl Field {
         &self.shape
     }
 
-    pub fn weed_count(&self) -> usize {
-        self.weed_count
+    /// Stems (x, y) of the weeds, metres.
+    pub fn weeds(&self) -> &[[f64; 2]] {
+        &self.weed_list
     }
 
     /// Ground position (x, y) of plant k of row i, position error included.
@@ -372,6 +373,45 @@ impl Field {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(64))]
+        /// The windowed lookup agrees with checking every plant and weed of the field.
+        #[test]
+        fn lookup_matches_brute_force(
+            seed in 0u64..1000, along in 0.0f64..0.05, across in 0.0f64..0.05,
+            pd in 0.02f64..0.3, spacing in 0.1f64..0.8, weeds in 0usize..40,
+            qx in -2.0f64..2.0, qy in -2.0f64..2.0,
+        ) {
+            let opts = SynthOptions {
+                along_sd_m: along, across_sd_m: across, plant_distance_m: pd,
+                row_spacing_m: spacing, weeds, weed_area_half_m: 1.5,
+                field_half_length_m: 3.0, field_half_width_m: 3.0, ..Default::default()
+            };
+            let f = Field::new(&opts, seed, [0.1, -0.2]);
+            let mut rng = super::Rng::new(seed);
+            for _ in 0..200 {
+                let (x, y) = (qx + rng.range(-0.3, 0.3), qy + rng.range(-0.3, 0.3));
+                let mut brute = false;
+                for i in f.rows() {
+                    for k in f.plant_indices() {
+                        let p = f.plant_position(i, k);
+                        brute |= f.shape.leaf_at(x - p[0], y - p[1]).is_some();
+                    }
+                }
+                for w in f.weeds() {
+                    brute |= f.shape.leaf_at(x - w[0], y - w[1]).is_some();
+                }
+                let fast = matches!(f.cover_at(x, y), Cover::Plant { .. });
+                prop_assert_eq!(fast, brute, "at ({}, {})", x, y);
+                if brute {
+                    let r = 0.01;
+                    prop_assert!(!f.is_bare(x - r, x + r, y - r, y + r));
+                }
+            }
+        }
+    }
 
     #[test]
     fn plant_has_four_leaves_and_a_stem() {

@@ -21,7 +21,7 @@ mod truth;
 
 pub use bayer::mosaic;
 pub use field::{Cover, Field, PlantShape};
-pub use noise::{gaussian_blur, salt_and_pepper};
+pub use noise::{salt_and_pepper, Blur};
 pub use options::{Style, SynthOptions};
 pub use pose::Pose;
 pub use protocol::{random_scene, Protocol};
@@ -59,6 +59,23 @@ pub struct SynthImage {
     pub data: Vec<u8>,
 }
 
+impl SynthImage {
+    /// The image as a pipeline frame carrying its ground truth, stamped now.
+    pub fn into_frame(self, seq: u64, truth: GroundTruth) -> crate::frame::Frame {
+        let now = crate::frame::now_ns();
+        crate::frame::Frame {
+            seq,
+            capture_ns: now,
+            receive_ns: now,
+            width: self.width,
+            height: self.height,
+            format: self.format,
+            data: self.data,
+            truth: Some(std::sync::Arc::new(truth)),
+        }
+    }
+}
+
 /// Renders one image of `options` through `cal` from `seed`, with its ground truth.
 /// (For many images through one calibration, keep a [`Renderer`].)
 pub fn render(
@@ -81,4 +98,34 @@ pub fn render(
         },
         truth,
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::camera::ideal_pal;
+
+    #[test]
+    fn render_gives_an_image_in_the_style_format_and_its_truth() {
+        let cal = ideal_pal(128, 154);
+        let opts = SynthOptions {
+            style: Style::Bayer,
+            yaw_deg: 5.0,
+            ..Default::default()
+        };
+        let (img, truth) = render(&cal, &opts, 21).unwrap();
+        assert_eq!((img.width, img.height), (154, 128));
+        assert_eq!(img.format, PixelFormat::BayerRggb8);
+        assert_eq!(img.data.len(), 154 * 128);
+        assert_eq!(truth.seed, 21);
+        let frame = img.into_frame(3, truth);
+        assert!(frame.view().is_ok());
+        assert_eq!(frame.truth.as_ref().unwrap().seed, 21);
+        let bad = SynthOptions {
+            row_spacing_m: 0.0,
+            ..Default::default()
+        };
+        let e = render(&cal, &bad, 1).unwrap_err().to_string();
+        assert!(e.contains("row_spacing_m"), "{e}");
+    }
 }

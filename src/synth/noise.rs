@@ -1,8 +1,9 @@
 //! The paper's background noise: salt and pepper of a given density, then Gaussian smoothing.
 //!
 //! Owns [`salt_and_pepper`] (each pixel, with probability `density`, becomes black or white,
-//! all channels alike, drawn from the seed) and [`gaussian_blur`] (separable, clamped at the
-//! borders, on up to `threads` threads, into a caller-owned scratch buffer).
+//! all channels alike, drawn from the seed) and [`Blur`] (separable Gaussian smoothing in
+//! 16.16 fixed point, clamped at the borders, on up to `threads` threads, with its scratch
+//! buffers kept from image to image).
 
 use super::rng::Rng;
 use std::sync::Mutex;
@@ -43,76 +44,113 @@ fn kernel(sigma: f64) -> Vec<u32> {
     k
 }
 
-/// Smooths `img` (width×height×channels) in place with a Gaussian of `sigma` pixels, using
-/// `tmp` (same length) as scratch. Does nothing for sigma ≤ 0.
-pub fn gaussian_blur(
-    img: &mut [u8],
-    tmp: &mut [u8],
-    width: usize,
-    height: usize,
-    channels: usize,
+/// Separable Gaussian smoothing with its scratch buffers, reused from image to image.
+#[derive(Debug, Clone, Default)]
+pub struct Blur {
     sigma: f64,
-    threads: usize,
-) {
-    if sigma <= 0.0 || width == 0 || height == 0 {
-        return;
+    kernel: Vec<u32>,
+    /// The image after the horizontal pass.
+    tmp: Vec<u8>,
+    /// Per thread: a row padded at both ends (clamped), and an accumulator row.
+    rows: Vec<(Vec<u8>, Vec<u32>)>,
+}
+
+impl Blur {
+    pub fn new() -> Self {
+        Self::default()
     }
-    let k = kernel(sigma);
-    let radius = (k.len() / 2) as isize;
-    let row_bytes = width * channels;
-    // Horizontal pass: img -> tmp.
-    {
-        let src: &[u8] = img;
-        let bands = Mutex::new(tmp.chunks_mut(row_bytes).enumerate());
-        let work = || loop {
-            let next = bands.lock().map(|mut it| it.next()).unwrap_or(None);
-            let Some((r, out)) = next else { break };
-            let row = &src[r * row_bytes..(r + 1) * row_bytes];
-            for c in 0..width {
-                for ch in 0..channels {
-                    let mut acc = 0u32;
-                    for (i, &kv) in k.iter().enumerate() {
-                        let cc = (c as isize + i as isize - radius).clamp(0, width as isize - 1)
-                            as usize;
-                        acc += kv * row[cc * channels + ch] as u32;
-                    }
-                    out[c * channels + ch] = ((acc + 32768) >> 16) as u8;
+
+    /// Smooths `img` (width×height×channels) in place with a Gaussian of `sigma` pixels
+    /// (clamped at the borders) on up to `threads` threads. Does nothing for sigma ≤ 0.
+    pub fn apply(
+        &mut self,
+        img: &mut [u8],
+        width: usize,
+        height: usize,
+        channels: usize,
+        sigma: f64,
+        threads: usize,
+    ) {
+        if sigma <= 0.0 || width == 0 || height == 0 {
+            return;
+        }
+        debug_assert_eq!(img.len(), width * height * channels);
+        if sigma != self.sigma || self.kernel.is_empty() {
+            self.kernel = kernel(sigma);
+            self.sigma = sigma;
+        }
+        let k = &self.kernel;
+        let radius = k.len() / 2;
+        let row_bytes = width * channels;
+        let pad = radius * channels;
+        self.tmp.resize(img.len(), 0);
+        self.rows.resize_with(threads.max(1), Default::default);
+        for (padded, acc) in &mut self.rows {
+            padded.resize(row_bytes + 2 * pad, 0);
+            acc.resize(row_bytes, 0);
+        }
+        // Horizontal pass: img -> tmp.
+        {
+            let src: &[u8] = img;
+            let bands = Mutex::new(self.tmp.chunks_mut(row_bytes).enumerate());
+            let work = |(padded, acc): &mut (Vec<u8>, Vec<u32>)| loop {
+                let next = bands.lock().map(|mut it| it.next()).unwrap_or(None);
+                let Some((r, out)) = next else { break };
+                let row = &src[r * row_bytes..(r + 1) * row_bytes];
+                padded[pad..pad + row_bytes].copy_from_slice(row);
+                for i in 0..radius {
+                    let (l, rr) = (i * channels, pad + row_bytes + i * channels);
+                    padded.copy_within(pad..pad + channels, l);
+                    padded.copy_within(pad + row_bytes - channels..pad + row_bytes, rr);
                 }
-            }
-        };
-        run(threads, &work);
-    }
-    // Vertical pass: tmp -> img.
-    {
-        let src: &[u8] = tmp;
-        let bands = Mutex::new(img.chunks_mut(row_bytes).enumerate());
-        let work = || loop {
-            let next = bands.lock().map(|mut it| it.next()).unwrap_or(None);
-            let Some((r, out)) = next else { break };
-            for (x, o) in out.iter_mut().enumerate() {
-                let mut acc = 0u32;
+                acc.fill(32768);
                 for (i, &kv) in k.iter().enumerate() {
-                    let rr =
-                        (r as isize + i as isize - radius).clamp(0, height as isize - 1) as usize;
-                    acc += kv * src[rr * row_bytes + x] as u32;
+                    let src = &padded[i * channels..i * channels + row_bytes];
+                    for (a, &v) in acc.iter_mut().zip(src) {
+                        *a += kv * v as u32;
+                    }
                 }
-                *o = ((acc + 32768) >> 16) as u8;
-            }
-        };
-        run(threads, &work);
+                for (o, &a) in out.iter_mut().zip(acc.iter()) {
+                    *o = (a >> 16) as u8;
+                }
+            };
+            run_each(&mut self.rows, &work);
+        }
+        // Vertical pass: tmp -> img.
+        {
+            let src: &[u8] = &self.tmp;
+            let bands = Mutex::new(img.chunks_mut(row_bytes).enumerate());
+            let work = |(_, acc): &mut (Vec<u8>, Vec<u32>)| loop {
+                let next = bands.lock().map(|mut it| it.next()).unwrap_or(None);
+                let Some((r, out)) = next else { break };
+                acc.fill(32768);
+                for (i, &kv) in k.iter().enumerate() {
+                    let rr = (r + i).saturating_sub(radius).min(height - 1);
+                    let row = &src[rr * row_bytes..(rr + 1) * row_bytes];
+                    for (a, &v) in acc.iter_mut().zip(row) {
+                        *a += kv * v as u32;
+                    }
+                }
+                for (o, &a) in out.iter_mut().zip(acc.iter()) {
+                    *o = (a >> 16) as u8;
+                }
+            };
+            run_each(&mut self.rows, &work);
+        }
     }
 }
 
-fn run(threads: usize, work: &(dyn Fn() + Sync)) {
-    if threads <= 1 {
-        work();
-    } else {
-        std::thread::scope(|s| {
-            for _ in 1..threads {
-                s.spawn(work);
+/// Runs `work` once per scratch item, each on its own thread (the first on this one).
+pub(crate) fn run_each<T: Send>(items: &mut [T], work: &(dyn Fn(&mut T) + Sync)) {
+    match items {
+        [] => {}
+        [only] => work(only),
+        [first, rest @ ..] => std::thread::scope(|s| {
+            for item in rest {
+                s.spawn(move || work(item));
             }
-            work();
-        });
+            work(first);
+        }),
     }
 }
 
@@ -135,17 +173,53 @@ mod tests {
     #[test]
     fn blur_keeps_flat_areas_and_spreads_a_dot() {
         let (w, h) = (21, 21);
+        let mut blur = Blur::new();
         let mut img = vec![100u8; w * h];
-        let mut tmp = vec![0u8; w * h];
-        gaussian_blur(&mut img, &mut tmp, w, h, 1, 1.5, 2);
+        blur.apply(&mut img, w, h, 1, 1.5, 2);
         assert!(img.iter().all(|&v| v == 100));
         let mut img = vec![0u8; w * h * 3];
         img[(10 * w + 10) * 3 + 1] = 255;
-        let mut tmp = vec![0u8; w * h * 3];
-        gaussian_blur(&mut img, &mut tmp, w, h, 3, 1.0, 2);
+        blur.apply(&mut img, w, h, 3, 1.0, 2);
         let g = |r: usize, c: usize| img[(r * w + c) * 3 + 1];
         assert!(g(10, 10) > g(10, 11) && g(10, 11) > g(10, 12));
         assert_eq!(g(9, 10), g(10, 9));
         assert_eq!(img[(10 * w + 10) * 3], 0, "channels stay separate");
+        // borders are clamped: a dot in the corner keeps most of its mass nearby
+        let mut img = vec![0u8; w * h];
+        img[0] = 255;
+        blur.apply(&mut img, w, h, 1, 1.0, 1);
+        assert!(
+            img[0] > 70 && img[1] > 30 && img[w].abs_diff(img[1]) <= 1,
+            "{:?}",
+            (&img[..3], img[w], img[2 * w])
+        );
+    }
+
+    #[test]
+    fn blur_matches_a_direct_convolution() {
+        let (w, h) = (37, 23);
+        let mut rng = Rng::new(2);
+        let orig: Vec<u8> = (0..w * h).map(|_| rng.below(256) as u8).collect();
+        let mut img = orig.clone();
+        Blur::new().apply(&mut img, w, h, 1, 1.3, 2);
+        let sigma: f64 = 1.3;
+        let rad = 4isize;
+        let g = |d: isize| (-(d * d) as f64 / (2.0 * sigma * sigma)).exp();
+        let norm: f64 = (-rad..=rad).map(g).sum::<f64>();
+        for r in 0..h as isize {
+            for c in 0..w as isize {
+                let mut acc = 0.0;
+                for dr in -rad..=rad {
+                    for dc in -rad..=rad {
+                        let rr = (r + dr).clamp(0, h as isize - 1) as usize;
+                        let cc = (c + dc).clamp(0, w as isize - 1) as usize;
+                        acc += g(dr) * g(dc) * orig[rr * w + cc] as f64;
+                    }
+                }
+                let want = acc / (norm * norm);
+                let got = img[r as usize * w + c as usize] as f64;
+                assert!((got - want).abs() <= 1.01, "({r},{c}) {got} vs {want}");
+            }
+        }
     }
 }

@@ -1,17 +1,18 @@
 //! The renderer: a scene seen through a calibrated omnidirectional camera.
 //!
 //! Owns [`Renderer`]. Setup (once per calibration) computes the unit ray of every pixel
-//! corner and the field-of-view mask; a render then, for every pixel inside the mask, turns
-//! its four corner rays into the world, and samples the pixel's footprint on the ground:
-//! 2×2 samples where the footprint is small against a leaf and they all agree, else n×n
-//! (`samples`), so that far rows merge into solid lines as through real optics. Rays above
-//! the horizon see sky. Pixels outside the mask are black. Then the background noise
-//! (salt and pepper, then Gaussian smoothing), and for the Bayer style the RGGB mosaic.
-//! Rendering runs on up to `threads` threads over bands of rows and allocates nothing once
-//! the scratch buffers exist.
+//! corner, the field-of-view mask, and each row's span of pixels inside it. A render then
+//! turns each band of rows' corner rays into the world and onto the ground once, and for
+//! every pixel inside the mask samples its footprint: a footprint no plant reaches is plain
+//! soil; a footprint small against a leaf takes 2×2 samples and keeps them when they agree;
+//! any other pixel takes n×n samples (`samples`), so that far rows merge into solid lines
+//! as through real optics. Rays above the horizon see sky; pixels outside the mask are
+//! black. Then the background noise (salt and pepper, then Gaussian smoothing), and for the
+//! Bayer style the RGGB mosaic. Rendering runs on up to `threads` threads over bands of rows
+//! and allocates nothing once its scratch buffers exist.
 
 use super::field::Cover;
-use super::noise;
+use super::noise::{self, run_each, Blur};
 use super::options::Style;
 use super::scene::Scene;
 use super::SynthError;
@@ -22,9 +23,9 @@ use std::sync::Mutex;
 /// Rows per work item handed to a thread.
 const BAND_ROWS: usize = 8;
 
-/// Renders scenes through one calibration.
+/// What setup computes once per calibration.
 #[derive(Debug, Clone)]
-pub struct Renderer {
+struct Geometry {
     cal: Calibration,
     width: usize,
     height: usize,
@@ -32,11 +33,31 @@ pub struct Renderer {
     corners: Vec<[f32; 3]>,
     /// Per pixel: inside the field of view.
     inside: Vec<bool>,
+    /// Per image row: the columns `lo..hi` that hold every pixel inside the field of view
+    /// (empty when none).
+    spans: Vec<(usize, usize)>,
+}
+
+/// A pixel corner seen in the world: its ray and, when the ray hits the ground, the point.
+#[derive(Debug, Clone, Copy, Default)]
+struct Corner {
+    dir: Vector3<f64>,
+    /// Ground point (x, y) and distance along the ray; valid when `hits`.
+    ground: [f64; 2],
+    t: f64,
+    hits: bool,
+}
+
+/// Renders scenes through one calibration.
+#[derive(Debug, Clone)]
+pub struct Renderer {
+    geo: Geometry,
     threads: usize,
+    /// Per thread: the corners of one band of rows.
+    bands: Vec<Vec<Corner>>,
     /// RGB scratch image for the Bayer style.
     rgb: Vec<u8>,
-    /// Scratch for the Gaussian smoothing.
-    tmp: Vec<u8>,
+    blur: Blur,
 }
 
 /// Sample class, to decide whether a pixel's first samples agree.
@@ -59,41 +80,66 @@ impl Renderer {
                 "image {w}x{h} is too large to render (at most 64 megapixels)"
             )));
         }
-        let m = &cal.model;
-        let mut corners = Vec::with_capacity((h + 1) * (w + 1));
-        for r in 0..=h {
-            for c in 0..=w {
-                let ray = m.cam2world(r as f64 - 0.5, c as f64 - 0.5);
-                corners.push([ray.x as f32, ray.y as f32, ray.z as f32]);
-            }
-        }
         let mut inside = Vec::with_capacity(h * w);
+        let mut spans = Vec::with_capacity(h);
+        // The mask test of Calibration::pixel_in_fov, on squared radii (every pixel centre
+        // lies on the sensor).
+        let (xc, yc) = (cal.model.xc, cal.model.yc);
+        let radii2 = cal
+            .mask
+            .map(|m| (m.inner_radius_px.powi(2), m.outer_radius_px.powi(2)));
         for r in 0..h {
+            let (mut lo, mut hi) = (w, 0);
+            let dr2 = (r as f64 - xc).powi(2);
             for c in 0..w {
-                let (rf, cf) = (r as f64, c as f64);
-                let ok = cal.pixel_in_fov(rf, cf)
-                    && (cal.mask.is_some() || cal.pixel_in_model_range(rf, cf));
+                let ok = match radii2 {
+                    Some((lo2, hi2)) => {
+                        let r2 = dr2 + (c as f64 - yc).powi(2);
+                        r2 >= lo2 && r2 <= hi2
+                    }
+                    None => cal.pixel_in_model_range(r as f64, c as f64),
+                };
+                if ok {
+                    lo = lo.min(c);
+                    hi = c + 1;
+                }
                 inside.push(ok);
             }
+            spans.push(if lo < hi { (lo, hi) } else { (0, 0) });
         }
-        if !inside.iter().any(|&b| b) {
+        if spans.iter().all(|s| s.0 == s.1) {
             return Err(SynthError::Calibration(
                 "no pixel of the calibration lies inside its field of view".into(),
             ));
+        }
+        // Corner rays, only where a pixel inside the mask needs them.
+        let m = &cal.model;
+        let mut corners = vec![[0.0f32; 3]; (h + 1) * (w + 1)];
+        for r in 0..=h {
+            let (a, b) = (spans[r.saturating_sub(1)], spans[r.min(h - 1)]);
+            let (lo, hi) = (a.0.min(b.0), a.1.max(b.1));
+            for c in lo..=hi.min(w) {
+                let ray = m.cam2world(r as f64 - 0.5, c as f64 - 0.5);
+                corners[r * (w + 1) + c] = [ray.x as f32, ray.y as f32, ray.z as f32];
+            }
         }
         let threads = std::thread::available_parallelism()
             .map(|n| n.get())
             .unwrap_or(1)
             .clamp(1, 16);
         Ok(Renderer {
-            cal: cal.clone(),
-            width: w,
-            height: h,
-            corners,
-            inside,
+            geo: Geometry {
+                cal: cal.clone(),
+                width: w,
+                height: h,
+                corners,
+                inside,
+                spans,
+            },
             threads,
+            bands: Vec::new(),
             rgb: Vec::new(),
-            tmp: Vec::new(),
+            blur: Blur::new(),
         })
     }
 
@@ -104,17 +150,17 @@ impl Renderer {
     }
 
     pub fn calibration(&self) -> &Calibration {
-        &self.cal
+        &self.geo.cal
     }
 
     /// Image width and height in pixels.
     pub fn size(&self) -> (u32, u32) {
-        (self.width as u32, self.height as u32)
+        (self.geo.width as u32, self.geo.height as u32)
     }
 
     /// Bytes an image of `style` needs.
     pub fn buffer_len(&self, style: Style) -> usize {
-        self.width * self.height * style.pixel_format().bytes_per_pixel()
+        self.geo.width * self.geo.height * style.pixel_format().bytes_per_pixel()
     }
 
     /// Renders `scene` into `out` (row-major, `buffer_len(scene.options.style)` bytes, in the
@@ -128,23 +174,23 @@ impl Renderer {
                 actual: out.len(),
             });
         }
-        let (w, h) = (self.width, self.height);
-        let mut rgb = std::mem::take(&mut self.rgb);
-        let mut tmp = std::mem::take(&mut self.tmp);
+        let (w, h) = (self.geo.width, self.geo.height);
         let channels = if style == Style::Grey { 1 } else { 3 };
         let target: &mut [u8] = if style == Style::Bayer {
-            rgb.resize(w * h * 3, 0);
-            &mut rgb
+            self.rgb.resize(w * h * 3, 0);
+            &mut self.rgb
         } else {
             out
         };
-        self.shade(scene, target, channels);
+        self.bands.resize_with(self.threads, Vec::new);
+        for b in &mut self.bands {
+            b.resize((BAND_ROWS + 1) * (w + 1), Corner::default());
+        }
+        shade(&self.geo, scene, target, channels, &mut self.bands);
         if scene.options.noise > 0.0 {
             noise::salt_and_pepper(target, channels, scene.options.noise, scene.seed);
-            tmp.resize(target.len(), 0);
-            noise::gaussian_blur(
+            self.blur.apply(
                 target,
-                &mut tmp,
                 w,
                 h,
                 channels,
@@ -152,145 +198,192 @@ impl Renderer {
                 self.threads,
             );
             // The mask is applied after the smoothing, as in the paper.
-            for (px, &ins) in target.chunks_exact_mut(channels).zip(&self.inside) {
+            for (px, &ins) in target.chunks_exact_mut(channels).zip(&self.geo.inside) {
                 if !ins {
                     px.fill(0);
                 }
             }
         }
         if style == Style::Bayer {
-            super::bayer::mosaic(&rgb, out, w, h);
+            super::bayer::mosaic(&self.rgb, out, w, h);
         }
-        self.rgb = rgb;
-        self.tmp = tmp;
         Ok(())
     }
+}
 
-    /// Shades every pixel into `out` (grey or RGB).
-    fn shade(&self, scene: &Scene, out: &mut [u8], channels: usize) {
-        let rot = scene.pose.world_from_camera.matrix().clone_owned();
-        let row_bytes = self.width * channels;
-        let bands = Mutex::new(out.chunks_mut(row_bytes * BAND_ROWS).enumerate());
-        let work = || loop {
-            let next = bands.lock().map(|mut it| it.next()).unwrap_or(None);
-            let Some((b, band)) = next else { break };
-            for (j, row) in band.chunks_mut(row_bytes).enumerate() {
-                self.shade_row(scene, &rot, b * BAND_ROWS + j, row, channels);
-            }
-        };
-        if self.threads <= 1 {
-            work();
-        } else {
-            std::thread::scope(|s| {
-                for _ in 1..self.threads {
-                    s.spawn(work);
-                }
-                work();
-            });
+/// Shades every pixel into `out` (grey or RGB), one band of rows at a time per thread.
+fn shade(
+    geo: &Geometry,
+    scene: &Scene,
+    out: &mut [u8],
+    channels: usize,
+    scratch: &mut [Vec<Corner>],
+) {
+    let rot = scene.pose.world_from_camera.matrix().clone_owned();
+    let row_bytes = geo.width * channels;
+    let bands = Mutex::new(out.chunks_mut(row_bytes * BAND_ROWS).enumerate());
+    let work = |corners: &mut Vec<Corner>| loop {
+        let next = bands.lock().map(|mut it| it.next()).unwrap_or(None);
+        let Some((b, band)) = next else { break };
+        let r0 = b * BAND_ROWS;
+        let rows = band.len() / row_bytes;
+        corners_of_band(geo, scene, &rot, r0, rows, corners);
+        for (j, row) in band.chunks_mut(row_bytes).enumerate() {
+            shade_row(geo, scene, corners, r0 + j, j, row, channels);
+        }
+    };
+    run_each(scratch, &work);
+}
+
+/// World rays and ground points of the corners of rows `r0 .. r0 + rows` (inside spans).
+fn corners_of_band(
+    geo: &Geometry,
+    scene: &Scene,
+    rot: &Matrix3<f64>,
+    r0: usize,
+    rows: usize,
+    out: &mut [Corner],
+) {
+    let (w, h) = (geo.width, geo.height);
+    let cw = w + 1;
+    let c0 = scene.pose.centre;
+    for j in 0..=rows {
+        let r = r0 + j;
+        let (a, b) = (geo.spans[r.saturating_sub(1)], geo.spans[r.min(h - 1)]);
+        let (lo, hi) = (a.0.min(b.0), a.1.max(b.1).min(w));
+        if lo >= hi {
+            continue;
+        }
+        for c in lo..=hi {
+            let v = geo.corners[r * cw + c];
+            let dir = rot * Vector3::new(v[0] as f64, v[1] as f64, v[2] as f64);
+            let hits = dir.z < 0.0;
+            let t = if hits { c0.z / -dir.z } else { 0.0 };
+            out[j * cw + c] = Corner {
+                dir,
+                ground: [c0.x + t * dir.x, c0.y + t * dir.y],
+                t,
+                hits,
+            };
         }
     }
+}
 
-    fn shade_row(
-        &self,
-        scene: &Scene,
-        rot: &Matrix3<f64>,
-        r: usize,
-        out: &mut [u8],
-        channels: usize,
-    ) {
-        let w = self.width;
-        let cw = w + 1;
-        let world = |i: usize| {
-            let v = self.corners[i];
-            rot * Vector3::new(v[0] as f64, v[1] as f64, v[2] as f64)
-        };
-        let o = &scene.options;
-        let n = o.samples as usize;
-        // Footprints smaller than this (metres) need only 2×2 samples when those agree.
-        let fine = 0.5 * o.leaf_width_m.min(o.leaf_length_m);
-        let c0 = scene.pose.centre;
-        for col in 0..w {
-            let px = &mut out[col * channels..(col + 1) * channels];
-            if !self.inside[r * w + col] {
-                px.fill(0);
+/// Rounds a channel value to a byte.
+#[inline]
+fn to_byte(v: f32) -> u8 {
+    (v + 0.5).clamp(0.0, 255.0) as u8
+}
+
+fn shade_row(
+    geo: &Geometry,
+    scene: &Scene,
+    corners: &[Corner],
+    r: usize,
+    j: usize,
+    out: &mut [u8],
+    channels: usize,
+) {
+    let w = geo.width;
+    let cw = w + 1;
+    let o = &scene.options;
+    let n = o.samples as usize;
+    // Footprints smaller than this (metres) need only 2×2 samples when those agree.
+    let fine = 0.5 * o.leaf_width_m.min(o.leaf_length_m);
+    let c0 = scene.pose.centre;
+    let (lo, hi) = geo.spans[r];
+    out[..lo * channels].fill(0);
+    out[hi * channels..].fill(0);
+    for col in lo..hi {
+        let px = &mut out[col * channels..(col + 1) * channels];
+        if !geo.inside[r * w + col] {
+            px.fill(0);
+            continue;
+        }
+        let k00 = &corners[j * cw + col];
+        let k01 = &corners[j * cw + col + 1];
+        let k10 = &corners[(j + 1) * cw + col];
+        let k11 = &corners[(j + 1) * cw + col + 1];
+        // Footprint on the ground (metres, the longer diagonal) when all of the pixel
+        // sees the ground; a pixel that no plant reaches is plain soil.
+        let mut footprint = f64::INFINITY;
+        let all_ground = k00.hits && k01.hits && k10.hits && k11.hits;
+        if all_ground {
+            let (a, b, c, d) = (k00.ground, k01.ground, k10.ground, k11.ground);
+            let diag1 = (a[0] - d[0]).powi(2) + (a[1] - d[1]).powi(2);
+            let diag2 = (b[0] - c[0]).powi(2) + (b[1] - c[1]).powi(2);
+            footprint = diag1.max(diag2).sqrt();
+            let x0 = a[0].min(b[0]).min(c[0]).min(d[0]);
+            let x1 = a[0].max(b[0]).max(c[0]).max(d[0]);
+            let y0 = a[1].min(b[1]).min(c[1]).min(d[1]);
+            let y1 = a[1].max(b[1]).max(c[1]).max(d[1]);
+            if scene.field.is_bare(x0, x1, y0, y1) {
+                let p = &scene.palette;
+                if channels == 1 {
+                    px[0] = to_byte(p.grey_soil);
+                } else {
+                    let (cx, cy) = (0.5 * (x0 + x1), 0.5 * (y0 + y1));
+                    let rgb = p.soil_rgb(scene.texture.filtered(cx, cy, footprint));
+                    for k in 0..3 {
+                        px[k] = to_byte(rgb[k]);
+                    }
+                }
                 continue;
             }
-            let d00 = world(r * cw + col);
-            let d01 = world(r * cw + col + 1);
-            let d10 = world((r + 1) * cw + col);
-            let d11 = world((r + 1) * cw + col + 1);
-            let ground = |d: &Vector3<f64>| {
-                (d.z < 0.0).then(|| {
-                    let t = c0.z / -d.z;
-                    [c0.x + t * d.x, c0.y + t * d.y]
-                })
-            };
-            // Footprint on the ground (metres, the longer diagonal) when all of the pixel
-            // sees the ground; a pixel that no plant reaches is plain soil.
-            let mut footprint = f64::INFINITY;
-            if let (Some(a), Some(b), Some(c), Some(d)) =
-                (ground(&d00), ground(&d01), ground(&d10), ground(&d11))
-            {
-                let diag1 = (a[0] - d[0]).powi(2) + (a[1] - d[1]).powi(2);
-                let diag2 = (b[0] - c[0]).powi(2) + (b[1] - c[1]).powi(2);
-                footprint = diag1.max(diag2).sqrt();
-                let x0 = a[0].min(b[0]).min(c[0]).min(d[0]);
-                let x1 = a[0].max(b[0]).max(c[0]).max(d[0]);
-                let y0 = a[1].min(b[1]).min(c[1]).min(d[1]);
-                let y1 = a[1].max(b[1]).max(c[1]).max(d[1]);
-                if scene.field.is_bare(x0, x1, y0, y1) {
-                    let p = &scene.palette;
-                    if channels == 1 {
-                        px[0] = p.grey_soil.round() as u8;
-                    } else {
-                        let (cx, cy) = (0.25 * (x0 + x1) * 2.0, 0.25 * (y0 + y1) * 2.0);
-                        let rgb = p.soil_rgb(scene.texture.filtered(cx, cy, footprint));
-                        for k in 0..3 {
-                            px[k] = rgb[k].round().clamp(0.0, 255.0) as u8;
-                        }
-                    }
-                    continue;
-                }
-            }
-            let sample = |u: f64, v: f64| -> (Class, [f32; 3]) {
+        }
+        let (d00, d01, d10, d11) = (k00.dir, k01.dir, k10.dir, k11.dir);
+        // Where the depth hardly changes across the pixel the ground mapping is affine to
+        // well under a thousandth of the footprint: interpolate on the ground directly.
+        let t_lo = k00.t.min(k01.t).min(k10.t).min(k11.t);
+        let t_hi = k00.t.max(k01.t).max(k10.t).max(k11.t);
+        let affine = all_ground && t_hi < t_lo * 1.02;
+        let (g00, g01, g10, g11) = (k00.ground, k01.ground, k10.ground, k11.ground);
+        let sample = |u: f64, v: f64| -> (Class, [f32; 3]) {
+            if affine {
+                let lerp = |k: usize| {
+                    (g00[k] * (1.0 - v) + g01[k] * v) * (1.0 - u)
+                        + (g10[k] * (1.0 - v) + g11[k] * v) * u
+                };
+                shade_ground(scene, lerp(0), lerp(1), footprint)
+            } else {
                 let d = (d00 * (1.0 - v) + d01 * v) * (1.0 - u) + (d10 * (1.0 - v) + d11 * v) * u;
                 shade_ray(scene, &c0, &d, footprint)
-            };
-            let small = footprint < fine;
-            let mut acc = [0.0f32; 3];
-            let mut done = false;
-            if small || n <= 2 {
-                let mut first = None;
-                let mut agree = true;
-                for (u, v) in [(0.25, 0.25), (0.25, 0.75), (0.75, 0.25), (0.75, 0.75)] {
-                    let (cls, c) = sample(u, v);
-                    agree &= *first.get_or_insert(cls) == cls;
-                    for k in 0..3 {
-                        acc[k] += c[k] * 0.25;
-                    }
-                }
-                done = agree || n <= 2;
             }
-            if !done {
-                acc = [0.0; 3];
-                let inv = 1.0 / (n * n) as f32;
-                for i in 0..n {
-                    let u = (i as f64 + 0.5) / n as f64;
-                    for j in 0..n {
-                        let v = (j as f64 + 0.5) / n as f64;
-                        let (_, c) = sample(u, v);
-                        for k in 0..3 {
-                            acc[k] += c[k] * inv;
-                        }
-                    }
-                }
-            }
-            if channels == 1 {
-                px[0] = acc[0].round().clamp(0.0, 255.0) as u8;
-            } else {
+        };
+        let small = footprint < fine;
+        let mut acc = [0.0f32; 3];
+        let mut done = false;
+        if small || n <= 2 {
+            let mut first = None;
+            let mut agree = true;
+            for (u, v) in [(0.25, 0.25), (0.25, 0.75), (0.75, 0.25), (0.75, 0.75)] {
+                let (cls, c) = sample(u, v);
+                agree &= *first.get_or_insert(cls) == cls;
                 for k in 0..3 {
-                    px[k] = acc[k].round().clamp(0.0, 255.0) as u8;
+                    acc[k] += c[k] * 0.25;
                 }
+            }
+            done = agree || n <= 2;
+        }
+        if !done {
+            acc = [0.0; 3];
+            let inv = 1.0 / (n * n) as f32;
+            for i in 0..n {
+                let u = (i as f64 + 0.5) / n as f64;
+                for jj in 0..n {
+                    let v = (jj as f64 + 0.5) / n as f64;
+                    let (_, c) = sample(u, v);
+                    for k in 0..3 {
+                        acc[k] += c[k] * inv;
+                    }
+                }
+            }
+        }
+        if channels == 1 {
+            px[0] = to_byte(acc[0]);
+        } else {
+            for k in 0..3 {
+                px[k] = to_byte(acc[k]);
             }
         }
     }
@@ -314,7 +407,14 @@ fn shade_ray(
         return (Class::Sky, p.sky_rgb(s));
     }
     let t = centre.z / -d.z;
-    let (x, y) = (centre.x + t * d.x, centre.y + t * d.y);
+    shade_ground(scene, centre.x + t * d.x, centre.y + t * d.y, footprint)
+}
+
+/// Colour (grey in channel 0 for the grey style) of ground point (x, y).
+#[inline]
+fn shade_ground(scene: &Scene, x: f64, y: f64, footprint: f64) -> (Class, [f32; 3]) {
+    let p = &scene.palette;
+    let grey = scene.options.style == Style::Grey;
     match scene.field.cover_at(x, y) {
         Cover::Plant { edge } => {
             if grey {

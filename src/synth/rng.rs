@@ -83,12 +83,18 @@ impl Rng {
     /// Standard normal sample (Marsaglia's polar method; the second value is discarded so
     /// that the generator carries no hidden state).
     pub fn normal(&mut self) -> f64 {
+        self.normal_pair().0
+    }
+
+    /// Two independent standard normal samples (Marsaglia's polar method).
+    pub fn normal_pair(&mut self) -> (f64, f64) {
         loop {
             let u = 2.0 * self.uniform() - 1.0;
             let v = 2.0 * self.uniform() - 1.0;
             let s = u * u + v * v;
             if s > 0.0 && s < 1.0 {
-                return u * (-2.0 * s.ln() / s).sqrt();
+                let f = (-2.0 * s.ln() / s).sqrt();
+                return (u * f, v * f);
             }
         }
     }
@@ -131,6 +137,13 @@ mod tests {
         assert!((su / n - 0.5).abs() < 0.005);
         assert!((sn / n).abs() < 0.01);
         assert!((sn2 / n - 1.0).abs() < 0.02);
+        // the pair's halves are uncorrelated
+        let mut sxy = 0.0;
+        for _ in 0..100_000 {
+            let (a, b) = r.normal_pair();
+            sxy += a * b;
+        }
+        assert!((sxy / 100_000.0).abs() < 0.02);
         for _ in 0..1000 {
             assert!(r.below(7) < 7);
         }

@@ -27,7 +27,8 @@ pub struct GroundTruth {
     pub tilt_rad: f64,
     /// Camera height above the ground, metres.
     pub height_m: f64,
-    /// Lateral offset of the camera from the nearest row, metres.
+    /// Lateral offset of the camera from the nearest row, metres: world y of the camera
+    /// minus world y of that row, in (−spacing/2, spacing/2].
     pub lateral_offset_m: f64,
     pub row_spacing_m: f64,
     pub plant_distance_m: f64,
@@ -67,7 +68,8 @@ impl GroundTruth {
         let o = &scene.options;
         let pose = &scene.pose;
         let s = o.row_spacing_m;
-        let lateral = o.lateral_m - (o.lateral_m / s).round() * s;
+        // ties (camera midway) go to the row at lower y, so the offset lies in (-s/2, s/2]
+        let lateral = o.lateral_m - (o.lateral_m / s - 0.5).ceil() * s;
         let (rows, lateral_m): (Vec<_>, Vec<_>) = visible_rows(scene, cal)
             .into_iter()
             .map(|(i, n)| ([n.x, n.y, n.z], i as f64 * s - o.lateral_m))
@@ -210,7 +212,12 @@ mod tests {
 
     #[test]
     fn plant_centres_lie_on_the_listed_great_circles_and_are_rendered_bright() {
-        let cal = ideal_fisheye(2050, 2448).rescaled(2.0).unwrap();
+        check_plants_on_rows(&ideal_fisheye(2050, 2448).rescaled(2.0).unwrap());
+        check_plants_on_rows(&crate::camera::ideal_pal(2050, 2448).rescaled(2.0).unwrap());
+    }
+
+    fn check_plants_on_rows(cal: &Calibration) {
+        let cal = cal.clone();
         let opts = SynthOptions {
             yaw_deg: 12.0,
             pitch_deg: -4.0,
@@ -254,7 +261,7 @@ mod tests {
         }
         assert!(checked > 200 && bright > 10, "{checked} {bright}");
         // and half-way between rows, near the camera, is soil
-        let mid = Vector3::new(0.3, opts.lateral_m + 0.0, 0.0);
+        let mid = Vector3::new(1.0, opts.lateral_m, 0.0);
         let px = cal
             .ray_to_pixel_in_fov(&sc.pose.direction_to(&mid).unwrap())
             .unwrap();
@@ -286,7 +293,7 @@ mod tests {
         assert_eq!(a.noise.weeds, 10);
         assert_eq!(a.noise.across_row_sd_m, 0.01);
         assert!((a.heading_rad - 20f64.to_radians()).abs() < 1e-12);
-        assert!((a.lateral_offset_m.abs() - 0.25).abs() < 1e-12);
+        assert!((a.lateral_offset_m - 0.25).abs() < 1e-12);
     }
 
     #[test]

@@ -1,0 +1,103 @@
+//! Speed of the edge method and of the whole combined detector on a full GC2450C frame
+//! (2448×2050, a synthetic field of the paper's Table I protocol), one core, both shipped
+//! lenses: Canny alone (on the detector's 1224×1025 working image), the standalone edge
+//! method on the full frame, and the whole detector with each method. Prints the combined
+//! detector's stage breakdown.
+//!
+//! Run: `cargo bench --bench edge`.
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use omnirow::camera::{ideal_fisheye, ideal_pal};
+use omnirow::detect::edge::{Canny, CannyOptions, EdgeDetector, EdgeOptions};
+use omnirow::detect::{Detection, Detector, DetectorOptions, Method};
+use omnirow::frame::ImageView;
+use omnirow::synth::{random_scene, render, Protocol};
+use std::hint::black_box;
+use std::time::Duration;
+
+const W: usize = 2448;
+const H: usize = 2050;
+
+fn bench(c: &mut Criterion) {
+    for (name, cal) in [
+        ("fisheye", ideal_fisheye(H as u32, W as u32)),
+        ("pal", ideal_pal(H as u32, W as u32)),
+    ] {
+        let (img, _) = render(&cal, &random_scene(7, Protocol::Table1), 7).unwrap();
+        let view = ImageView::new(img.width, img.height, img.format, &img.data).unwrap();
+        let mut g = c.benchmark_group(format!("edge_{name}_2448x2050"));
+        g.sample_size(20).measurement_time(Duration::from_secs(4));
+
+        // The whole detector per method; the combined one is the target (≤ 20 ms median).
+        let mut working = None;
+        for method in [Method::Combined, Method::Edge, Method::Hough] {
+            let opts = DetectorOptions {
+                method,
+                ..Default::default()
+            };
+            let mut det = Detector::new(&cal, opts).unwrap();
+            let mut out = Detection::default();
+            det.process(&view, &mut out).unwrap();
+            g.bench_function(format!("detector_{}", method.name()), |b| {
+                b.iter(|| det.process(black_box(&view), &mut out).unwrap())
+            });
+            let t = det.last_times();
+            eprintln!(
+                "{name} {}: prepare {:?} hough {:?} edge {:?} vanishing {:?} total {:?}; {} rows; {:?}",
+                method.name(),
+                t.prepare,
+                t.hough,
+                t.edge,
+                t.vanishing,
+                t.total(),
+                out.rows.len(),
+                det.last_edge()
+            );
+            if method == Method::Combined {
+                let (_, smoothed) = det.preparer().vegetation();
+                let (mask, _) = det.preparer().mask().unwrap();
+                working = Some((smoothed.clone(), mask.to_vec()));
+            }
+        }
+
+        // Canny alone on the detector's working image (smoothed vegetation, 1224×1025).
+        let (smoothed, mask) = working.unwrap();
+        let (ww, wh) = (smoothed.width, smoothed.height);
+        let mut canny = Canny::new(CannyOptions::default()).unwrap();
+        let mut edges = vec![0u8; ww * wh];
+        g.bench_function("canny_working_image", |b| {
+            b.iter(|| {
+                canny
+                    .process(black_box(&smoothed.data), ww, wh, &mask, &mut edges)
+                    .unwrap()
+            })
+        });
+
+        // The standalone edge method on the full frame: 2×2 reduction, smoothing, Canny,
+        // chains, split, merge.
+        let full_mask: Vec<u8> = (0..W * H)
+            .map(|i| cal.pixel_in_fov((i / W) as f64, (i % W) as f64) as u8)
+            .collect();
+        let opts = EdgeOptions {
+            canny: CannyOptions {
+                sigma: 1.4,
+                ..Default::default()
+            },
+            downsample: 2,
+            ..Default::default()
+        };
+        let mut det = EdgeDetector::new(&cal, W, H, opts).unwrap();
+        let mut rows = Vec::new();
+        det.process(&img.data, &full_mask, &mut rows).unwrap();
+        g.bench_function("edge_method_full_frame", |b| {
+            b.iter(|| {
+                det.process(black_box(&img.data), &full_mask, &mut rows)
+                    .unwrap()
+            })
+        });
+        g.finish();
+    }
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);

@@ -1,0 +1,683 @@
+//! Canny edge detection on an 8-bit image (the vegetation or greyscale image), then the mask.
+//!
+//! Gaussian smoothing (fixed-point, separable; skipped when the input is already smoothed),
+//! Sobel gradients, non-maximum suppression along the quantised gradient direction, and
+//! hysteresis between a low and a high threshold, given either as absolute gradient magnitudes
+//! or as quantiles of the gradient magnitudes inside the mask. Only pixels inside the mask can
+//! be edges. [`Canny`] owns every buffer; once warmed up on an image size, `process` does not
+//! allocate.
+
+use super::EdgeError;
+use serde::{Deserialize, Serialize};
+
+/// How the hysteresis thresholds are given.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ThresholdMode {
+    /// `low` and `high` are Sobel gradient magnitudes (0..≈1443 for 8-bit input).
+    Absolute,
+    /// `high` is the quantile (0..1) of gradient magnitudes over the masked pixels that is
+    /// the high threshold; `low` is the low threshold as a fraction (0..1) of the high one.
+    Quantile,
+}
+
+/// Options of the Canny stage.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CannyOptions {
+    /// Standard deviation (pixels) of the Gaussian smoothing; 0 when the input is already
+    /// smoothed. Default 0: the detector hands the edge method its smoothed vegetation image
+    /// (1.4 suits an unsmoothed image).
+    pub sigma: f64,
+    /// How `low` and `high` are read. Default `quantile`.
+    pub mode: ThresholdMode,
+    /// Low threshold (see [`ThresholdMode`]). Default 0.5 (half the high threshold).
+    pub low: f64,
+    /// High threshold (see [`ThresholdMode`]). Default 0.9 (the 90th percentile).
+    pub high: f64,
+    /// In quantile mode, the high threshold never falls below this magnitude, so that a
+    /// flat image gives no edges. Default 40.
+    pub min_high: f64,
+}
+
+impl Default for CannyOptions {
+    fn default() -> Self {
+        CannyOptions {
+            sigma: 0.0,
+            mode: ThresholdMode::Quantile,
+            low: 0.5,
+            high: 0.9,
+            min_high: 40.0,
+        }
+    }
+}
+
+impl CannyOptions {
+    /// Checks that the numbers make sense.
+    pub fn validate(&self) -> Result<(), EdgeError> {
+        let bad = |m: String| Err(EdgeError::Options(format!("canny: {m}")));
+        if !(self.sigma >= 0.0 && self.sigma <= 10.0) {
+            return bad(format!("sigma = {} must be in 0..=10", self.sigma));
+        }
+        match self.mode {
+            ThresholdMode::Absolute => {
+                if !(self.low >= 0.0 && self.high >= self.low && self.high.is_finite()) {
+                    return bad(format!(
+                        "absolute thresholds need 0 <= low <= high, got low {} high {}",
+                        self.low, self.high
+                    ));
+                }
+            }
+            ThresholdMode::Quantile => {
+                if !(self.high > 0.0 && self.high < 1.0) {
+                    return bad(format!("quantile high = {} must be in (0, 1)", self.high));
+                }
+                if !(self.low > 0.0 && self.low <= 1.0) {
+                    return bad(format!("quantile low = {} must be in (0, 1]", self.low));
+                }
+                if !(self.min_high >= 0.0 && self.min_high.is_finite()) {
+                    return bad(format!("min_high = {} must be >= 0", self.min_high));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// What one Canny run did.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct CannyResult {
+    /// Low and high thresholds used (gradient magnitudes).
+    pub low: u16,
+    pub high: u16,
+    /// Number of edge pixels written.
+    pub edge_pixels: usize,
+}
+
+/// Magnitudes are stored in the low 14 bits, the quantised gradient direction in the top two.
+const MAG_MASK: u16 = 0x3fff;
+/// Largest Sobel L2 magnitude of 8-bit input: √2 · 4 · 255.
+const MAX_MAG: usize = 1443;
+/// Value of a weak (not yet connected) candidate in the edge buffer during hysteresis.
+const WEAK: u8 = 1;
+/// Value of an edge pixel in the output.
+pub const EDGE: u8 = 255;
+
+/// Canny edge detector owning its buffers (sized on first use, reused after).
+#[derive(Debug, Clone)]
+pub struct Canny {
+    options: CannyOptions,
+    kernel: Vec<u16>,
+    smooth: Vec<u8>,
+    row: Vec<u8>,
+    acc: Vec<u16>,
+    /// Gradient magnitude (low 14 bits) and direction sector (top 2 bits).
+    grad: Vec<u16>,
+    hist: Vec<u32>,
+    stack: Vec<u32>,
+}
+
+/// Fixed-point scale of the Gaussian weights (they sum to 256).
+const KSHIFT: u32 = 8;
+
+impl Canny {
+    /// A detector with the given options (checked).
+    pub fn new(options: CannyOptions) -> Result<Self, EdgeError> {
+        options.validate()?;
+        let kernel = gaussian_kernel(options.sigma);
+        Ok(Canny {
+            options,
+            kernel,
+            smooth: Vec::new(),
+            row: Vec::new(),
+            acc: Vec::new(),
+            grad: Vec::new(),
+            hist: vec![0; MAX_MAG + 1],
+            stack: Vec::new(),
+        })
+    }
+
+    pub fn options(&self) -> &CannyOptions {
+        &self.options
+    }
+
+    /// Sizes the buffers for a `width`×`height` image (done by `process` too).
+    pub fn warm_up(&mut self, width: usize, height: usize) {
+        let n = width * height;
+        if self.options.sigma > 0.0 {
+            self.smooth.resize(n, 0);
+            self.row.resize(width, 0);
+            self.acc.resize(width, 0);
+        }
+        self.grad.resize(n, 0);
+        if self.stack.capacity() < n / 16 {
+            self.stack.reserve(n / 16);
+        }
+    }
+
+    /// Runs Canny on `input` (`width`×`height`, row-major, one byte per pixel). Pixels where
+    /// `mask` is zero are never edges. `edges` receives [`EDGE`] at edge pixels, 0 elsewhere.
+    pub fn process(
+        &mut self,
+        input: &[u8],
+        width: usize,
+        height: usize,
+        mask: &[u8],
+        edges: &mut [u8],
+    ) -> Result<CannyResult, EdgeError> {
+        let n = width * height;
+        for (what, len) in [
+            ("input", input.len()),
+            ("mask", mask.len()),
+            ("edges", edges.len()),
+        ] {
+            if len != n {
+                return Err(EdgeError::Size {
+                    what,
+                    width,
+                    height,
+                    expected: n,
+                    actual: len,
+                });
+            }
+        }
+        edges.fill(0);
+        if width < 3 || height < 3 {
+            return Ok(CannyResult::default());
+        }
+        self.warm_up(width, height);
+        let src: &[u8] = if self.options.sigma > 0.0 {
+            gaussian(
+                input,
+                width,
+                height,
+                &self.kernel,
+                &mut self.acc,
+                &mut self.row,
+                &mut self.smooth,
+            );
+            &self.smooth
+        } else {
+            input
+        };
+        sobel(src, width, height, &mut self.grad);
+        let (low, high) = self.thresholds(width, height, mask);
+        let edge_pixels = nms_hysteresis(
+            &self.grad,
+            width,
+            height,
+            mask,
+            low,
+            high,
+            edges,
+            &mut self.stack,
+        );
+        Ok(CannyResult {
+            low,
+            high,
+            edge_pixels,
+        })
+    }
+
+    /// Sub-pixel position (row, column) of edge pixel (`row`, `col`) of the last run: the
+    /// vertex of the parabola through the gradient magnitudes across the edge (along the
+    /// quantised gradient direction), at most half a pixel from the pixel's centre. Without
+    /// it the non-maximum suppression would put a step edge consistently half a pixel to
+    /// one side, which biases the great circles fitted to the edges.
+    pub fn subpixel(&self, row: usize, col: usize, width: usize) -> [f64; 2] {
+        let (r, c) = (row as f64, col as f64);
+        if row == 0 || col == 0 || col + 1 >= width || (row + 1) * width >= self.grad.len() {
+            return [r, c];
+        }
+        let i = row * width + col;
+        let g = self.grad[i];
+        let (dr, dc): (isize, isize) = match g >> 14 {
+            0 => (0, 1),
+            1 => (1, 0),
+            2 => (1, -1),
+            _ => (1, 1),
+        };
+        let o = dr * width as isize + dc;
+        let m = (g & MAG_MASK) as f64;
+        let plus = (self.grad[(i as isize + o) as usize] & MAG_MASK) as f64;
+        let minus = (self.grad[(i as isize - o) as usize] & MAG_MASK) as f64;
+        let den = minus - 2.0 * m + plus;
+        if den >= 0.0 {
+            return [r, c];
+        }
+        let t = (0.5 * (minus - plus) / den).clamp(-0.5, 0.5);
+        [r + t * dr as f64, c + t * dc as f64]
+    }
+
+    /// The smoothed image of the last run (empty when `sigma` is 0).
+    pub fn smoothed(&self) -> &[u8] {
+        &self.smooth
+    }
+
+    fn thresholds(&mut self, width: usize, height: usize, mask: &[u8]) -> (u16, u16) {
+        let o = &self.options;
+        match o.mode {
+            ThresholdMode::Absolute => {
+                let low = o.low.round().clamp(1.0, MAX_MAG as f64) as u16;
+                let high = o.high.round().clamp(1.0, MAX_MAG as f64) as u16;
+                (low, high.max(low))
+            }
+            ThresholdMode::Quantile => {
+                // Histogram over every third row of the masked interior: plenty for a
+                // quantile, a third of the cost.
+                self.hist.fill(0);
+                let mut total = 0u64;
+                for r in (1..height - 1).step_by(3) {
+                    let g = &self.grad[r * width..(r + 1) * width];
+                    let m = &mask[r * width..(r + 1) * width];
+                    for (&gv, &mv) in g.iter().zip(m) {
+                        if mv != 0 {
+                            self.hist[(gv & MAG_MASK) as usize] += 1;
+                            total += 1;
+                        }
+                    }
+                }
+                if total == 0 {
+                    return (u16::MAX, u16::MAX);
+                }
+                let target = (o.high * total as f64).ceil() as u64;
+                let mut seen = 0u64;
+                let mut q = MAX_MAG;
+                for (v, &c) in self.hist.iter().enumerate() {
+                    seen += c as u64;
+                    if seen >= target {
+                        q = v;
+                        break;
+                    }
+                }
+                let high = (q as f64).max(o.min_high).max(1.0);
+                let low = (high * o.low).round().max(1.0);
+                (low as u16, high.round() as u16)
+            }
+        }
+    }
+}
+
+/// Gaussian weights in fixed point summing to 2^KSHIFT, radius at most ⌈3σ⌉ (and 30), taps
+/// that round to zero trimmed.
+fn gaussian_kernel(sigma: f64) -> Vec<u16> {
+    if sigma <= 0.0 {
+        return vec![1 << KSHIFT];
+    }
+    let radius = ((3.0 * sigma).ceil() as usize).clamp(1, 30);
+    let w: Vec<f64> = (0..=2 * radius)
+        .map(|i| {
+            let x = i as f64 - radius as f64;
+            (-x * x / (2.0 * sigma * sigma)).exp()
+        })
+        .collect();
+    let sum: f64 = w.iter().sum();
+    let scale = (1u32 << KSHIFT) as f64;
+    let mut k: Vec<i64> = w.iter().map(|v| (v / sum * scale).round() as i64).collect();
+    while k.len() > 1 && k[0] == 0 {
+        k.remove(0);
+        k.pop();
+    }
+    // Put the rounding error on the centre tap so the weights sum exactly to 2^KSHIFT.
+    let s: i64 = k.iter().sum();
+    let centre = k.len() / 2;
+    k[centre] = (k[centre] + (1i64 << KSHIFT) - s).max(0);
+    k.iter().map(|&v| v as u16).collect()
+}
+
+/// Separable Gaussian with replicated borders, in 16-bit fixed point (so that it vectorises
+/// on plain SSE2): for each output row a vertical pass into `row` (rounded to 8 bits), then a
+/// horizontal pass into `out`.
+fn gaussian(
+    input: &[u8],
+    width: usize,
+    height: usize,
+    kernel: &[u16],
+    acc: &mut [u16],
+    row: &mut [u8],
+    out: &mut [u8],
+) {
+    let radius = kernel.len() / 2;
+    let acc = &mut acc[..width];
+    let row = &mut row[..width];
+    let half = 1u16 << (KSHIFT - 1);
+    for r in 0..height {
+        acc.fill(half);
+        for (k, &wk) in kernel.iter().enumerate() {
+            let rr =
+                (r as isize + k as isize - radius as isize).clamp(0, height as isize - 1) as usize;
+            let src = &input[rr * width..(rr + 1) * width];
+            for (a, &v) in acc.iter_mut().zip(src) {
+                *a = a.wrapping_add(wk.wrapping_mul(v as u16));
+            }
+        }
+        for (d, &a) in row.iter_mut().zip(acc.iter()) {
+            *d = (a >> KSHIFT) as u8;
+        }
+        let dst = &mut out[r * width..(r + 1) * width];
+        if width > 2 * radius {
+            let inner = width - 2 * radius;
+            let a = &mut acc[..inner];
+            a.fill(half);
+            for (k, &wk) in kernel.iter().enumerate() {
+                for (x, &v) in a.iter_mut().zip(&row[k..k + inner]) {
+                    *x = x.wrapping_add(wk.wrapping_mul(v as u16));
+                }
+            }
+            for (d, &x) in dst[radius..radius + inner].iter_mut().zip(a.iter()) {
+                *d = (x >> KSHIFT) as u8;
+            }
+        }
+        let edge_cols =
+            (0..radius.min(width)).chain(width.saturating_sub(radius).max(radius)..width);
+        for c in edge_cols {
+            let mut a = half as u32;
+            for (k, &wk) in kernel.iter().enumerate() {
+                let cc = (c as isize + k as isize - radius as isize).clamp(0, width as isize - 1);
+                a += wk as u32 * row[cc as usize] as u32;
+            }
+            dst[c] = (a >> KSHIFT) as u8;
+        }
+    }
+}
+
+/// Sobel gradients: L2 magnitude in the low 14 bits and the direction sector in the top two
+/// (0: across columns, 1: across rows, 2: the anti-diagonal, 3: the diagonal). The border
+/// is zero.
+fn sobel(src: &[u8], width: usize, height: usize, grad: &mut [u16]) {
+    grad[..width].fill(0);
+    grad[(height - 1) * width..].fill(0);
+    let inner = width - 2;
+    for r in 1..height - 1 {
+        let a = &src[(r - 1) * width..r * width];
+        let b = &src[r * width..(r + 1) * width];
+        let c = &src[(r + 1) * width..(r + 2) * width];
+        let out = &mut grad[r * width..(r + 1) * width];
+        out[0] = 0;
+        out[width - 1] = 0;
+        let (a0, a1, a2) = (&a[..inner], &a[1..inner + 1], &a[2..inner + 2]);
+        let (b0, b2) = (&b[..inner], &b[2..inner + 2]);
+        let (c0, c1, c2) = (&c[..inner], &c[1..inner + 1], &c[2..inner + 2]);
+        let o = &mut out[1..inner + 1];
+        for i in 0..inner {
+            let gx = (a2[i] as i16 + 2 * b2[i] as i16 + c2[i] as i16)
+                - (a0[i] as i16 + 2 * b0[i] as i16 + c0[i] as i16);
+            let gy = (c0[i] as i16 + 2 * c1[i] as i16 + c2[i] as i16)
+                - (a0[i] as i16 + 2 * a1[i] as i16 + a2[i] as i16);
+            let (fx, fy) = (gx as f32, gy as f32);
+            let mag = (fx * fx + fy * fy).sqrt() as u16;
+            let (ax, ay) = (fx.abs(), fy.abs());
+            // Branch-free sector so that the loop vectorises.
+            let horizontal = (ay < TAN_22_5 * ax) as u16;
+            let vertical = (ay > TAN_67_5 * ax) as u16;
+            let same_sign = ((gx ^ gy) >= 0) as u16;
+            let diag = 2 + same_sign;
+            let not_hv = 1 - (horizontal | vertical);
+            let sector = vertical + not_hv * diag;
+            o[i] = mag | (sector << 14);
+        }
+    }
+}
+
+const TAN_22_5: f32 = 0.414_213_57;
+const TAN_67_5: f32 = 2.414_213_6;
+
+/// Non-maximum suppression inside the mask, then hysteresis. Returns the number of edges.
+#[allow(clippy::too_many_arguments)]
+fn nms_hysteresis(
+    grad: &[u16],
+    width: usize,
+    height: usize,
+    mask: &[u8],
+    low: u16,
+    high: u16,
+    edges: &mut [u8],
+    stack: &mut Vec<u32>,
+) -> usize {
+    stack.clear();
+    let w = width as isize;
+    let inner = width - 2;
+    for r in 1..height - 1 {
+        let row = r * width;
+        // Rows above, at and below, shifted so that index i is the pixel (r, i + 1) and its
+        // neighbours; each sector picks its pair, all in straight slices so that it vectorises.
+        let up = &grad[row - width..row];
+        let mid = &grad[row..row + width];
+        let dn = &grad[row + width..row + 2 * width];
+        let (ul, uc, ur) = (&up[..inner], &up[1..inner + 1], &up[2..inner + 2]);
+        let (ml, mc, mr) = (&mid[..inner], &mid[1..inner + 1], &mid[2..inner + 2]);
+        let (dl, dc, dr) = (&dn[..inner], &dn[1..inner + 1], &dn[2..inner + 2]);
+        let mk = &mask[row + 1..row + 1 + inner];
+        let out = &mut edges[row + 1..row + 1 + inner];
+        for i in 0..inner {
+            let g = mc[i];
+            let m = g & MAG_MASK;
+            let sector = g >> 14;
+            // Sector 0: left/right; 1: up/down; 2: up-right/down-left; 3: up-left/down-right.
+            // Selected with bit masks rather than a match so that the loop vectorises.
+            let e0 = 0u16.wrapping_sub((sector == 0) as u16);
+            let e1 = 0u16.wrapping_sub((sector == 1) as u16);
+            let e2 = 0u16.wrapping_sub((sector == 2) as u16);
+            let e3 = 0u16.wrapping_sub((sector == 3) as u16);
+            let n1 = ((mr[i] & e0) | (dc[i] & e1) | (dl[i] & e2) | (dr[i] & e3)) & MAG_MASK;
+            let n2 = ((ml[i] & e0) | (uc[i] & e1) | (ur[i] & e2) | (ul[i] & e3)) & MAG_MASK;
+            let keep = (m >= low) & (mk[i] != 0) & (m > n1) & (m >= n2);
+            let strong = m >= high;
+            // EDGE (255) when strong, WEAK (1) otherwise, 0 when not kept.
+            out[i] = (keep as u8) * (WEAK + (strong as u8) * (EDGE - WEAK));
+        }
+    }
+    // Seeds: the strong pixels (the border is never an edge).
+    let mut base = 0usize;
+    for chunk in edges.chunks(8) {
+        let zero = chunk.len() == 8 && u64::from_ne_bytes(chunk.try_into().unwrap_or([0; 8])) == 0;
+        if !zero {
+            for (k, &v) in chunk.iter().enumerate() {
+                if v == EDGE {
+                    stack.push((base + k) as u32);
+                }
+            }
+        }
+        base += chunk.len();
+    }
+    let nb: [isize; 8] = [-w - 1, -w, -w + 1, -1, 1, w - 1, w, w + 1];
+    while let Some(i) = stack.pop() {
+        for o in nb {
+            let j = (i as isize + o) as usize;
+            if edges[j] == WEAK {
+                edges[j] = EDGE;
+                stack.push(j as u32);
+            }
+        }
+    }
+    let mut count = 0usize;
+    for e in edges.iter_mut() {
+        let is_edge = *e == EDGE;
+        *e = if is_edge { EDGE } else { 0 };
+        count += is_edge as usize;
+    }
+    count
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn disc(width: usize, height: usize, cx: f64, cy: f64, r: f64) -> Vec<u8> {
+        let mut img = vec![0u8; width * height];
+        for y in 0..height {
+            for x in 0..width {
+                let d = ((x as f64 - cx).powi(2) + (y as f64 - cy).powi(2)).sqrt();
+                img[y * width + x] = if d < r { 200 } else { 20 };
+            }
+        }
+        img
+    }
+
+    #[test]
+    fn kernel_sums_to_one() {
+        for s in [0.5, 1.0, 1.4, 2.0, 3.3] {
+            let k = gaussian_kernel(s);
+            assert_eq!(
+                k.iter().map(|&v| v as u32).sum::<u32>(),
+                1 << KSHIFT,
+                "sigma {s}"
+            );
+            assert_eq!(k.len() % 2, 1);
+        }
+    }
+
+    #[test]
+    fn flat_image_smooths_to_itself_and_has_no_edges() {
+        let (w, h) = (40, 30);
+        let img = vec![77u8; w * h];
+        let mask = vec![1u8; w * h];
+        let mut edges = vec![9u8; w * h];
+        let mut c = Canny::new(CannyOptions {
+            sigma: 1.4,
+            ..Default::default()
+        })
+        .unwrap();
+        let r = c.process(&img, w, h, &mask, &mut edges).unwrap();
+        assert_eq!(r.edge_pixels, 0);
+        assert!(edges.iter().all(|&e| e == 0));
+        assert!(c.smoothed().iter().all(|&v| v == 77));
+    }
+
+    #[test]
+    fn circle_edge_is_thin_and_on_the_boundary() {
+        let (w, h) = (120, 100);
+        let (cx, cy, rad) = (60.0, 50.0, 30.0);
+        let img = disc(w, h, cx, cy, rad);
+        let mask = vec![1u8; w * h];
+        let mut edges = vec![0u8; w * h];
+        let mut c = Canny::new(CannyOptions {
+            sigma: 1.4,
+            mode: ThresholdMode::Absolute,
+            low: 50.0,
+            high: 150.0,
+            ..Default::default()
+        })
+        .unwrap();
+        let r = c.process(&img, w, h, &mask, &mut edges).unwrap();
+        // Circumference ~188 pixels; a thin 8-connected ring has about that many.
+        assert!(
+            (150..260).contains(&r.edge_pixels),
+            "{} edge pixels",
+            r.edge_pixels
+        );
+        for y in 0..h {
+            for x in 0..w {
+                if edges[y * w + x] != 0 {
+                    let d = ((x as f64 - cx).powi(2) + (y as f64 - cy).powi(2)).sqrt();
+                    assert!((d - rad).abs() < 1.6, "edge at ({y},{x}) d={d}");
+                }
+            }
+        }
+        // Every direction around the circle is covered (no gaps wider than a few degrees).
+        let mut seen = [false; 72];
+        for y in 0..h {
+            for x in 0..w {
+                if edges[y * w + x] != 0 {
+                    let a = (y as f64 - cy).atan2(x as f64 - cx).to_degrees() + 180.0;
+                    seen[((a / 5.0) as usize).min(71)] = true;
+                }
+            }
+        }
+        assert!(seen.iter().all(|&s| s), "gaps in the ring");
+    }
+
+    #[test]
+    fn mask_removes_edges_and_quantile_mode_adapts() {
+        let (w, h) = (120, 100);
+        let img = disc(w, h, 60.0, 50.0, 30.0);
+        let mut mask = vec![1u8; w * h];
+        for y in 0..h {
+            for x in 0..60 {
+                mask[y * w + x] = 0;
+            }
+        }
+        let mut edges = vec![0u8; w * h];
+        let mut c = Canny::new(CannyOptions {
+            sigma: 1.4,
+            ..Default::default()
+        })
+        .unwrap();
+        let r = c.process(&img, w, h, &mask, &mut edges).unwrap();
+        assert!(r.edge_pixels > 60, "{r:?}");
+        for y in 0..h {
+            for x in 0..60 {
+                assert_eq!(edges[y * w + x], 0);
+            }
+        }
+        // The same image brighter by a factor keeps its edges in quantile mode.
+        let bright: Vec<u8> = img.iter().map(|&v| (v as u32 * 5 / 4) as u8).collect();
+        let mut e2 = vec![0u8; w * h];
+        let r2 = c.process(&bright, w, h, &mask, &mut e2).unwrap();
+        assert!(r2.high > r.high);
+        assert_eq!(r2.edge_pixels, r.edge_pixels);
+    }
+
+    #[test]
+    fn subpixel_edges_are_centred_on_a_blurred_step() {
+        // A vertical step at column 20.5 (between 20 and 21), and one at 30.25 rendered by
+        // area coverage: sub-pixel positions land within a tenth of a pixel of the step.
+        let (w, h) = (50, 20);
+        for step in [20.5f64, 30.25, 14.8] {
+            let mut img = vec![0u8; w * h];
+            for r in 0..h {
+                for c in 0..w {
+                    let cover = (c as f64 + 0.5 - step).clamp(0.0, 1.0);
+                    img[r * w + c] = (40.0 + 160.0 * cover).round() as u8;
+                }
+            }
+            let mask = vec![1u8; w * h];
+            let mut edges = vec![0u8; w * h];
+            let mut c = Canny::new(CannyOptions {
+                sigma: 1.2,
+                ..Default::default()
+            })
+            .unwrap();
+            c.process(&img, w, h, &mask, &mut edges).unwrap();
+            let mut n = 0;
+            for r in 2..h - 2 {
+                for col in 0..w {
+                    if edges[r * w + col] != 0 {
+                        let p = c.subpixel(r, col, w);
+                        assert_eq!(p[0], r as f64);
+                        assert!((p[1] - step).abs() < 0.1, "step {step}: edge at {p:?}");
+                        n += 1;
+                    }
+                }
+            }
+            assert_eq!(n, h - 4, "one edge pixel per row");
+        }
+    }
+
+    #[test]
+    fn presmoothed_input_and_size_errors() {
+        let (w, h) = (50, 40);
+        let img = disc(w, h, 25.0, 20.0, 10.0);
+        let mask = vec![1u8; w * h];
+        let mut edges = vec![0u8; w * h];
+        let mut c = Canny::new(CannyOptions {
+            sigma: 0.0,
+            mode: ThresholdMode::Absolute,
+            low: 100.0,
+            high: 300.0,
+            ..Default::default()
+        })
+        .unwrap();
+        let r = c.process(&img, w, h, &mask, &mut edges).unwrap();
+        assert!(r.edge_pixels > 40);
+        let e = c.process(&img[1..], w, h, &mask, &mut edges).unwrap_err();
+        assert!(e.to_string().contains("input"), "{e}");
+        let e = c.process(&img, w, h, &mask[1..], &mut edges).unwrap_err();
+        assert!(e.to_string().contains("mask"), "{e}");
+        assert!(Canny::new(CannyOptions {
+            high: 1.5,
+            ..Default::default()
+        })
+        .is_err());
+    }
+}

@@ -1,0 +1,194 @@
+//! Accuracy of the Hough detector on the paper's Table I protocol (synthetic fields from
+//! `omnirow synth`: random yaw ±30° and pitch ±10°, background noise 0.1, plants 0.03 m
+//! apart so the rows are nearly solid), both ideal lenses and the real calibrations.
+//!
+//! The quick tests (a few images at reduced resolution, fixed seeds) guard the figures at
+//! looser margins. The full protocol (≥ 100 images, full resolution) is `#[ignore]`d:
+//! `cargo test --release --test detect_accuracy -- --ignored --nocapture`.
+
+use omnirow::camera::{ideal_fisheye, ideal_pal, Calibration};
+use omnirow::detect::{Detection, Detector, DetectorOptions};
+use omnirow::frame::ImageView;
+use omnirow::synth::{random_scene, Protocol, Renderer, Scene, Style};
+use std::path::Path;
+
+fn axis_angle(a: &nalgebra::Vector3<f64>, b: &nalgebra::Vector3<f64>) -> f64 {
+    a.cross(b).norm().atan2(a.dot(b).abs())
+}
+
+/// Per-image outcome: the VP error (rad) if found, and heading/tilt errors.
+#[derive(Debug, Clone, Copy)]
+struct Outcome {
+    vp_err: Option<f64>,
+    heading_err: Option<f64>,
+    tilt_err: Option<f64>,
+}
+
+#[derive(Debug, Default)]
+struct Summary {
+    images: usize,
+    found: usize,
+    /// Found within 1° of the truth ("correctly found", as the paper counts).
+    correct: usize,
+    mean_mrad: f64,
+    max_mrad: f64,
+    var_1e8: f64,
+    max_heading_mrad: f64,
+    max_tilt_mrad: f64,
+}
+
+fn summarise(outs: &[Outcome]) -> Summary {
+    let errs: Vec<f64> = outs
+        .iter()
+        .filter_map(|o| o.vp_err)
+        .filter(|&e| e < 1f64.to_radians())
+        .collect();
+    let n = errs.len().max(1) as f64;
+    let mean = errs.iter().sum::<f64>() / n;
+    let var = errs.iter().map(|e| (e - mean).powi(2)).sum::<f64>() / n;
+    Summary {
+        images: outs.len(),
+        found: outs.iter().filter(|o| o.vp_err.is_some()).count(),
+        correct: errs.len(),
+        mean_mrad: mean * 1e3,
+        max_mrad: errs.iter().copied().fold(0.0, f64::max) * 1e3,
+        var_1e8: var * 1e8,
+        max_heading_mrad: outs
+            .iter()
+            .filter_map(|o| o.heading_err)
+            .fold(0.0, f64::max)
+            * 1e3,
+        max_tilt_mrad: outs.iter().filter_map(|o| o.tilt_err).fold(0.0, f64::max) * 1e3,
+    }
+}
+
+/// Renders `count` Table I scenes (seeds `first..`) through `cal` in `style` and detects.
+fn run_protocol(cal: &Calibration, style: Style, first: u64, count: u64) -> Vec<Outcome> {
+    let mut renderer = Renderer::new(cal).unwrap();
+    let mut det = Detector::new(cal, DetectorOptions::default()).unwrap();
+    let mut out = Detection::default();
+    let mut buf = Vec::new();
+    (first..first + count)
+        .map(|seed| {
+            let mut opts = random_scene(seed, Protocol::Table1);
+            opts.style = style;
+            let scene = Scene::new(&opts, seed, &cal.mounting).unwrap();
+            buf.resize(renderer.buffer_len(style), 0);
+            renderer.render_into(&scene, &mut buf).unwrap();
+            let (w, h) = renderer.size();
+            let view = ImageView::new(w, h, style.pixel_format(), &buf).unwrap();
+            det.process(&view, &mut out).unwrap();
+            let truth = omnirow::synth::GroundTruth::of_scene(&scene, cal);
+            let t = nalgebra::Vector3::from(truth.vp_along);
+            Outcome {
+                vp_err: out.vanishing_point.map(|v| axis_angle(&v.direction, &t)),
+                heading_err: out.heading_rad.map(|h| (h - truth.heading_rad).abs()),
+                tilt_err: out.tilt_rad.map(|x| (x - truth.tilt_rad).abs()),
+            }
+        })
+        .collect()
+}
+
+fn report(name: &str, s: &Summary) {
+    println!(
+        "{name}: {} images, VP found {} ({:.1}%), within 1° {} | error mean {:.4} mrad, max {:.4} mrad, variance {:.3}e-8 | max heading error {:.4} mrad, max tilt error {:.4} mrad",
+        s.images,
+        s.found,
+        100.0 * s.found as f64 / s.images.max(1) as f64,
+        s.correct,
+        s.mean_mrad,
+        s.max_mrad,
+        s.var_1e8,
+        s.max_heading_mrad,
+        s.max_tilt_mrad
+    );
+}
+
+fn real_calibration(file: &str) -> Option<Calibration> {
+    let p = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/calib")).join(file);
+    if !p.exists() {
+        eprintln!("skipping {file}: {} is absent", p.display());
+        return None;
+    }
+    Some(Calibration::load(&p).unwrap())
+}
+
+/// Quick guard: 6 images per ideal lens at half the GC2450C's resolution, greyscale.
+#[test]
+fn table1_quick_ideal_lenses() {
+    for (name, cal) in [
+        ("fisheye", ideal_fisheye(1024, 1224)),
+        ("pal", ideal_pal(1024, 1224)),
+    ] {
+        let outs = run_protocol(&cal, Style::Grey, 1, 6);
+        let s = summarise(&outs);
+        report(name, &s);
+        assert_eq!(s.correct, 6, "{name}: {outs:?}");
+        assert!(s.mean_mrad < 0.15, "{name}: {s:?}");
+        assert!(s.max_mrad < 0.5, "{name}: {s:?}");
+    }
+}
+
+/// Quick guard on colour and Bayer input (vegetation index, half-resolution quads).
+#[test]
+fn table1_quick_colour_and_bayer() {
+    let cal = ideal_fisheye(1024, 1224);
+    for style in [Style::Colour, Style::Bayer] {
+        let outs = run_protocol(&cal, style, 20, 3);
+        let s = summarise(&outs);
+        report(&format!("fisheye {style:?}"), &s);
+        assert_eq!(s.correct, 3, "{style:?}: {outs:?}");
+        assert!(s.max_mrad < 1.0, "{style:?}: {s:?}");
+    }
+}
+
+/// Quick guard on the real calibrations (when ../shared is present).
+#[test]
+fn table1_quick_real_calibrations() {
+    for file in [
+        "fisheye_komatsu_185deg_1600x1600.txt",
+        "catadioptric_pal_annular_2448x2048.txt",
+    ] {
+        let Some(mut cal) = real_calibration(file) else {
+            continue;
+        };
+        if cal.model.width > 2000 {
+            cal = cal.rescaled(2.0).unwrap();
+        }
+        let outs = run_protocol(&cal, Style::Grey, 40, 3);
+        let s = summarise(&outs);
+        report(file, &s);
+        assert!(s.correct >= 2, "{file}: {outs:?}");
+        assert!(s.max_mrad < 1.0, "{file}: {s:?}");
+    }
+}
+
+/// The paper's Table I protocol in full: 60 images per ideal lens at the GC2450C's full
+/// resolution (2448×2050), greyscale, plus 20 per real calibration.
+#[test]
+#[ignore]
+fn table1_full_protocol() {
+    let n: u64 = std::env::var("OMNIROW_TABLE1_IMAGES")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(60);
+    let mut all = Vec::new();
+    for (name, cal) in [
+        ("ideal fisheye 185 2448x2050", ideal_fisheye(2050, 2448)),
+        ("ideal PAL 2448x2050", ideal_pal(2050, 2448)),
+    ] {
+        let outs = run_protocol(&cal, Style::Grey, 1000, n);
+        report(name, &summarise(&outs));
+        all.extend(outs);
+    }
+    report("both ideal lenses", &summarise(&all));
+    for file in [
+        "fisheye_komatsu_185deg_1600x1600.txt",
+        "catadioptric_pal_annular_2448x2048.txt",
+    ] {
+        if let Some(cal) = real_calibration(file) {
+            let outs = run_protocol(&cal, Style::Grey, 2000, n / 3);
+            report(file, &summarise(&outs));
+        }
+    }
+}

@@ -1,0 +1,112 @@
+//! The edge and combined methods on rendered synthetic fields (both shipped lenses), fixed
+//! seeds, loose margins: the edge method finds both boundaries of the rows, its rows pass
+//! through the true vanishing point, and every method finds the vanishing point.
+
+use nalgebra::Vector3;
+use omnirow::camera::{ideal_fisheye, ideal_pal, Calibration};
+use omnirow::detect::{Detection, Detector, DetectorOptions, Method};
+use omnirow::frame::ImageView;
+use omnirow::sphere::axis_angle;
+use omnirow::synth::{random_scene, render, GroundTruth, Protocol, SynthImage};
+
+fn scene(cal: &Calibration, seed: u64) -> (SynthImage, GroundTruth) {
+    render(cal, &random_scene(seed, Protocol::Table1), seed).unwrap()
+}
+
+fn detect(cal: &Calibration, method: Method, img: &SynthImage) -> Detection {
+    let mut d = Detector::new(
+        cal,
+        DetectorOptions {
+            method,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let view = ImageView::new(img.width, img.height, img.format, &img.data).unwrap();
+    let mut out = Detection::default();
+    d.process(&view, &mut out).unwrap();
+    out
+}
+
+fn check_lens(name: &str, cal: Calibration, seed: u64) {
+    let (img, truth) = scene(&cal, seed);
+    let vp = Vector3::from(truth.vp_along);
+    let normals: Vec<Vector3<f64>> = truth
+        .row_normals
+        .iter()
+        .map(|n| Vector3::from(*n))
+        .collect();
+
+    // Edge rows: most of the support lies on rows through the true vanishing point (within
+    // about two pixels' angle at this resolution), close to a true row (a boundary is a few
+    // centimetres from the row's centre line).
+    let edge = detect(&cal, Method::Edge, &img);
+    assert!(edge.rows.iter().all(|r| r.method == Method::Edge));
+    let mut hits = vec![0usize; normals.len()];
+    let (mut on, mut total) = (0u32, 0u32);
+    for r in &edge.rows {
+        total += r.support;
+        if r.normal.dot(&vp).abs() > 0.012 {
+            continue;
+        }
+        let (i, a) = normals
+            .iter()
+            .enumerate()
+            .map(|(i, n)| (i, axis_angle(n, &r.normal)))
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .unwrap();
+        if a < 0.06 {
+            hits[i] += 1;
+            on += r.support;
+        }
+    }
+    let both = hits.iter().filter(|&&h| h >= 2).count();
+    eprintln!(
+        "{name} seed {seed}: {} edge rows, {:.0}% of support on true rows, {} of {} true rows with two boundaries",
+        edge.rows.len(),
+        100.0 * on as f64 / total.max(1) as f64,
+        both,
+        normals.len()
+    );
+    assert!(
+        on * 2 > total,
+        "{name}: only {on} of {total} edge points on true rows"
+    );
+    assert!(
+        both >= 4,
+        "{name}: both boundaries of only {both} rows ({hits:?})"
+    );
+
+    // Every method finds the vanishing point within 3 mrad.
+    for (m, det) in [
+        (Method::Edge, edge),
+        (Method::Hough, detect(&cal, Method::Hough, &img)),
+        (Method::Combined, detect(&cal, Method::Combined, &img)),
+    ] {
+        let v = det
+            .vanishing_point
+            .unwrap_or_else(|| panic!("{name} {}: no vanishing point", m.name()));
+        let e = axis_angle(&v.direction, &vp);
+        eprintln!(
+            "{name} seed {seed} {}: vp error {:.3} mrad",
+            m.name(),
+            e * 1e3
+        );
+        assert!(e < 3e-3, "{name} {}: vp error {e} rad", m.name());
+        if m == Method::Combined {
+            for want in [Method::Hough, Method::Edge] {
+                assert!(det.rows.iter().any(|r| r.method == want));
+            }
+        }
+    }
+}
+
+#[test]
+fn fisheye_rows_and_vanishing_point() {
+    check_lens("fisheye", ideal_fisheye(512, 612), 11);
+}
+
+#[test]
+fn pal_rows_and_vanishing_point() {
+    check_lens("pal", ideal_pal(512, 612), 12);
+}
