@@ -184,8 +184,6 @@ struct RawConfig {
     http: Option<RawHttp>,
     record: Option<RawRecord>,
     log: Option<RawLog>,
-    // Not `Spanned`: toml cannot span a table that only exists through its sub-tables
-    // (`[detector.hough]` alone), so problems are reported at the table's first header.
     detector: Option<DetectorOptions>,
 }
 
@@ -291,20 +289,6 @@ struct Check<'a> {
 impl Check<'_> {
     fn line(&self, offset: usize) -> usize {
         line_of(self.text, offset)
-    }
-
-    /// A problem in the table `table`, reported at the first line that names it.
-    fn bad_table(&mut self, key: &str, table: &str, message: impl Into<String>) {
-        let offset = self
-            .text
-            .find(&format!("[{table}"))
-            .or_else(|| self.text.find(table))
-            .unwrap_or(0);
-        self.problems.push(Problem {
-            line: self.line(offset),
-            key: key.into(),
-            message: message.into(),
-        });
     }
 
     fn bad<T>(&mut self, key: &str, v: &Spanned<T>, message: impl Into<String>) {
@@ -679,18 +663,30 @@ fn validate(raw: RawConfig, c: &mut Check) -> Config {
     let detector = match &raw.detector {
         None => DetectorOptions::default(),
         Some(o) => {
+            // Nested tables cannot carry positions: point at the first [detector…] header.
+            let line = c
+                .text
+                .lines()
+                .position(|l| l.trim_start().starts_with("[detector"))
+                .map_or(0, |i| i + 1);
+            let mut bad = |key: &str, message: String| {
+                c.problems.push(Problem {
+                    line,
+                    key: key.into(),
+                    message,
+                })
+            };
             let checks = [
                 o.hough.validate(),
                 o.mask.validate(),
                 o.vanishing.validate(),
             ];
             for e in checks.into_iter().filter_map(Result::err) {
-                c.bad_table("detector", "detector", e.to_string());
+                bad("detector", e.to_string());
             }
             if !(o.max_tilt_deg.is_finite() && (0.0..=45.0).contains(&o.max_tilt_deg)) {
-                c.bad_table(
+                bad(
                     "detector.max_tilt_deg",
-                    "detector",
                     format!("{} is out of range (0 ..= 45)", o.max_tilt_deg),
                 );
             }

@@ -2,8 +2,8 @@
 //! (CDR) or `foxglove.RawImage` (protobuf, JSON, or `foxglove_msgs/msg/RawImage` in CDR), in
 //! mono8, rgb8, bgr8 or 8-bit Bayer.
 //!
-//! Streams the file from start to end (never loads it whole), paced by the messages' log
-//! times. A file cut short (power loss on the robot) replays every complete frame before the
+//! Streams the file from start to end (never loads it whole), paced by the images' capture
+//! stamps (the log time where an image has none). A file cut short (power loss on the robot) replays every complete frame before the
 //! cut and then ends with a warning. Ground truth recorded on `/omnirow/ground_truth` travels
 //! with its frame again.
 
@@ -125,7 +125,7 @@ impl McapReplay {
         Ok(())
     }
 
-    /// Reads records until the next image of the replayed channel: `(log_time, frame)`, or
+    /// Reads records until the next image of the replayed channel: `(pace time, frame)`, or
     /// `None` at the end of the file (clean or cut short).
     fn next_image(&mut self) -> Result<Option<(u64, Frame)>, SourceError> {
         loop {
@@ -262,7 +262,8 @@ impl McapReplay {
                                     };
                                     self.seq += 1;
                                     self.frames_this_pass += 1;
-                                    return Ok(Some((header.log_time, frame)));
+                                    // Paced by the capture clock (the camera's frame rate).
+                                    return Ok(Some((capture_ns, frame)));
                                 }
                                 Err(e) => tracing::warn!(
                                     file = %self.opts.path.display(),
