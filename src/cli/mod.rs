@@ -5,6 +5,7 @@
 
 mod calib;
 pub mod detect;
+mod eval;
 mod synth;
 
 use clap::{Parser, Subcommand};
@@ -23,10 +24,12 @@ pub enum Command {
     /// Inspect or produce calibrations.
     #[command(subcommand)]
     Calib(calib::CalibCommand),
-    /// Detect rows, their vanishing point, heading and tilt in images (one JSON line each).
-    Detect(detect::DetectArgs),
     /// Render a synthetic field image with its ground truth.
     Synth(Box<synth::SynthArgs>),
+    /// Detect rows, their vanishing point, heading and tilt in images (one JSON line each).
+    Detect(detect::DetectArgs),
+    /// Regenerate the paper's evaluation on synthetic images: tables and plots.
+    Eval(eval::EvalArgs),
 }
 
 /// Parses the process arguments and runs the command.
@@ -35,8 +38,9 @@ pub fn main() -> anyhow::Result<ExitCode> {
     init_logging();
     match cli.command {
         Command::Calib(c) => calib::run(c),
-        Command::Detect(a) => detect::run(a),
         Command::Synth(a) => synth::run(*a),
+        Command::Detect(a) => detect::run(a),
+        Command::Eval(a) => eval::run(a),
     }
 }
 

@@ -7,4 +7,11 @@
 
 pub mod font;
 pub mod plot;
+pub mod report;
+mod run;
 pub mod stats;
+
+pub use run::{
+    run, score, AccuracyRow, EvalError, EvalOptions, EvalResults, Experiment, FailureCell, Lens,
+    Outcome,
+};

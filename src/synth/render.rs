@@ -335,3 +335,145 @@ fn shade_ray(
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::camera::{ideal_fisheye, ideal_pal};
+    use crate::synth::SynthOptions;
+
+    fn render(cal: &Calibration, opts: &SynthOptions, seed: u64) -> Vec<u8> {
+        let scene = Scene::new(opts, seed, &cal.mounting).unwrap();
+        let mut r = Renderer::new(cal).unwrap().with_threads(2);
+        let mut out = vec![0u8; r.buffer_len(opts.style)];
+        r.render_into(&scene, &mut out).unwrap();
+        out
+    }
+
+    #[test]
+    fn deterministic_and_thread_count_independent() {
+        let cal = ideal_fisheye(256, 306);
+        let opts = SynthOptions {
+            noise: 0.2,
+            weeds: 30,
+            along_sd_m: 0.01,
+            across_sd_m: 0.01,
+            style: Style::Colour,
+            field_half_length_m: 30.0,
+            field_half_width_m: 30.0,
+            ..Default::default()
+        };
+        let a = render(&cal, &opts, 9);
+        assert_eq!(a, render(&cal, &opts, 9));
+        let scene = Scene::new(&opts, 9, &cal.mounting).unwrap();
+        let mut one = Renderer::new(&cal).unwrap().with_threads(1);
+        let mut b = vec![0u8; a.len()];
+        one.render_into(&scene, &mut b).unwrap();
+        assert_eq!(a, b);
+        assert_ne!(a, render(&cal, &opts, 10));
+    }
+
+    #[test]
+    fn mask_is_black_and_pal_has_an_annulus() {
+        for (cal, inner) in [
+            (ideal_fisheye(256, 306), false),
+            (ideal_pal(256, 306), true),
+        ] {
+            let img = render(&cal, &SynthOptions::default(), 1);
+            let (h, w) = cal.size();
+            let m = cal.mask.unwrap();
+            let at = |r: f64, c: f64| img[r as usize * w as usize + c as usize];
+            // corners of the sensor are outside the image circle
+            assert_eq!(at(0.0, 0.0), 0);
+            assert_eq!(at(h as f64 - 1.0, w as f64 - 1.0), 0);
+            let (xc, yc) = (cal.model.xc.round(), cal.model.yc.round());
+            if inner {
+                assert_eq!(at(xc, yc), 0, "blind centre of the PAL");
+            } else {
+                assert!(at(xc, yc) > 0);
+            }
+            // a ring just inside the outer radius sees the ground: soil grey or brighter
+            let r = m.outer_radius_px - 3.0;
+            assert!(at(xc, yc + r) >= 30 && at(xc, yc - r) >= 30);
+        }
+    }
+
+    #[test]
+    fn background_noise_has_the_asked_density() {
+        let cal = ideal_fisheye(256, 306);
+        for density in [0.1, 0.4] {
+            let opts = SynthOptions {
+                noise: density,
+                noise_blur_px: 0.0,
+                ..Default::default()
+            };
+            let img = render(&cal, &opts, 3);
+            let clean = render(&cal, &SynthOptions::default(), 3);
+            let (mut inside, mut changed) = (0usize, 0usize);
+            let (_, w) = cal.size();
+            for (i, (&a, &b)) in img.iter().zip(&clean).enumerate() {
+                let (r, c) = ((i / w as usize) as f64, (i % w as usize) as f64);
+                if cal.pixel_in_fov(r, c) {
+                    inside += 1;
+                    // the clean image holds only soil, plant, and mixtures: never 0 or 255
+                    assert!(b > 0 && b < 255);
+                    changed += (a == 0 || a == 255) as usize;
+                }
+            }
+            let f = changed as f64 / inside as f64;
+            assert!((f - density).abs() < 0.02, "{f} vs {density}");
+        }
+    }
+
+    #[test]
+    fn bayer_is_the_mosaic_of_the_colour_image() {
+        let cal = ideal_pal(256, 306);
+        let colour = SynthOptions {
+            style: Style::Colour,
+            noise: 0.1,
+            ..Default::default()
+        };
+        let rgb = render(&cal, &colour, 4);
+        let raw = render(
+            &cal,
+            &SynthOptions {
+                style: Style::Bayer,
+                ..colour.clone()
+            },
+            4,
+        );
+        let (h, w) = cal.size();
+        let mut expect = vec![0u8; (h * w) as usize];
+        crate::synth::mosaic(&rgb, &mut expect, w as usize, h as usize);
+        assert_eq!(raw, expect);
+        // the colour image really is colour: plants green, sky blue somewhere
+        let green = rgb.chunks_exact(3).filter(|p| p[1] > p[0] + 15).count();
+        let blue = rgb.chunks_exact(3).filter(|p| p[2] > p[0] + 15).count();
+        assert!(blue > 20, "{blue}");
+        assert!(green > 20, "{green}");
+    }
+
+    #[test]
+    fn far_rows_are_anti_aliased() {
+        // Looking along the rows near the horizon, pixels hold partial coverage (grey levels
+        // between soil and plant), not just the two levels.
+        let cal = ideal_fisheye(512, 612);
+        let opts = SynthOptions {
+            plant_distance_m: 0.03,
+            ..Default::default()
+        };
+        let img = render(&cal, &opts, 1);
+        let mid = img.iter().filter(|&&v| v > 45 && v < 200).count();
+        assert!(mid > 500, "{mid}");
+    }
+
+    #[test]
+    fn wrong_buffer_size_is_an_error() {
+        let cal = ideal_fisheye(64, 80);
+        let scene = Scene::new(&SynthOptions::default(), 1, &cal.mounting).unwrap();
+        let mut r = Renderer::new(&cal).unwrap();
+        let mut out = vec![0u8; 10];
+        let e = r.render_into(&scene, &mut out).unwrap_err().to_string();
+        assert!(e.contains("5120") && e.contains("10"), "{e}");
+    }
+}
