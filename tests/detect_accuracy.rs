@@ -105,7 +105,7 @@ fn report(name: &str, s: &Summary) {
 }
 
 fn real_calibration(file: &str) -> Option<Calibration> {
-    let p = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/calib")).join(file);
+    let p = shared_dir().join("calib").join(file);
     if !p.exists() {
         eprintln!("skipping {file}: {} is absent", p.display());
         return None;
@@ -191,4 +191,14 @@ fn table1_full_protocol() {
             report(file, &summarise(&outs));
         }
     }
+}
+
+/// ../shared relative to the crate root, or `OMNIROW_SHARED_DIR` when set (for worktrees
+/// that live elsewhere).
+fn shared_dir() -> std::path::PathBuf {
+    std::env::var_os("OMNIROW_SHARED_DIR")
+        .map(std::path::PathBuf::from)
+        .unwrap_or_else(|| {
+            Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../shared")).to_path_buf()
+        })
 }

@@ -272,7 +272,7 @@ fn pal_lens_mask_radius_override_and_methods() {
 
 #[test]
 fn real_images_give_sane_json() {
-    let root = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../shared"));
+    let root = shared_dir();
     let sets = [
         (
             "calib/fisheye_komatsu_185deg_1600x1600.txt",
@@ -327,4 +327,14 @@ fn real_images_give_sane_json() {
             }
         }
     }
+}
+
+/// ../shared relative to the crate root, or `OMNIROW_SHARED_DIR` when set (for worktrees
+/// that live elsewhere).
+fn shared_dir() -> std::path::PathBuf {
+    std::env::var_os("OMNIROW_SHARED_DIR")
+        .map(std::path::PathBuf::from)
+        .unwrap_or_else(|| {
+            Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../shared")).to_path_buf()
+        })
 }
