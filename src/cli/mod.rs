@@ -4,6 +4,7 @@
 //! Each subcommand returns an exit code (`ExitCode`) or an error that `main` reports.
 
 mod calib;
+mod cameras;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -21,6 +22,8 @@ pub enum Command {
     /// Inspect or produce calibrations.
     #[command(subcommand)]
     Calib(calib::CalibCommand),
+    /// List the GigE Vision / USB3 Vision cameras Aravis finds (needs the `camera` feature).
+    Cameras(cameras::CamerasArgs),
 }
 
 /// Parses the process arguments and runs the command.
@@ -29,6 +32,7 @@ pub fn main() -> anyhow::Result<ExitCode> {
     init_logging();
     match cli.command {
         Command::Calib(c) => calib::run(c),
+        Command::Cameras(a) => cameras::run(a),
     }
 }
 
