@@ -182,10 +182,16 @@ impl Worker {
                     ever_connected = true;
                     backoff = Duration::from_millis(self.cfg.reconnect_initial_ms);
                     let end = self.stream(&camera, &stream, &info);
+                    if let SessionEnd::Lost(_) = end {
+                        // Say so before the teardown, which waits on a camera that is gone.
+                        self.counters.set_state(CameraState::CameraLost);
+                    }
                     // Teardown: errors are expected when the camera is gone.
+                    let t = Instant::now();
                     let _ = camera.stop_acquisition();
                     drop(stream);
                     drop(camera);
+                    tracing::debug!(ms = t.elapsed().as_millis() as u64, "session torn down");
                     match end {
                         SessionEnd::Stopped => break,
                         SessionEnd::SinkGone => {
@@ -193,7 +199,6 @@ impl Worker {
                             break;
                         }
                         SessionEnd::Lost(why) => {
-                            self.counters.set_state(CameraState::CameraLost);
                             tracing::warn!(reason = why, "camera lost; reconnecting");
                         }
                     }
@@ -254,6 +259,13 @@ impl Worker {
         Ok((camera, stream, info))
     }
 
+    fn note_stream_buffers(&self, stream: &Stream) {
+        let (n_in, n_out) = stream.n_buffers();
+        self.counters
+            .stream_buffers
+            .store((n_in.max(0) + n_out.max(0)) as u64, Ordering::Relaxed);
+    }
+
     fn stream(&mut self, camera: &Camera, stream: &Stream, info: &SessionInfo) -> SessionEnd {
         let lost = Arc::new(AtomicBool::new(false));
         let _handler = camera.device().map(|d| {
@@ -272,6 +284,7 @@ impl Worker {
         let pop_timeout = self.cfg.effective_pop_timeout();
         let mut consecutive_timeouts = 0u32;
         let mut waited = Duration::ZERO;
+        let mut last_block_id: Option<u64> = None;
         loop {
             if self.stopping() {
                 return SessionEnd::Stopped;
@@ -299,7 +312,17 @@ impl Worker {
                 self.counters.set_state(CameraState::Streaming);
             }
             let receive_ns = now_ns();
-            self.seq += 1;
+            // seq follows the camera's block ids, so gaps are frames lost upstream.
+            let fid = buffer.frame_id();
+            let step = match last_block_id {
+                Some(last) => super::block_id_step(last, fid),
+                None => 1,
+            };
+            last_block_id = Some(fid);
+            if step > 1 {
+                self.counters.missing.fetch_add(step - 1, Ordering::Relaxed);
+            }
+            self.seq += step;
             let status = buffer.status();
             let (ptr, len) = buffer.data();
             let ok = status == BufferStatus::Success
@@ -311,8 +334,16 @@ impl Worker {
                 && len >= frame_len;
             if !ok {
                 GigeCounters::bump(&self.counters.incomplete);
-                tracing::debug!(?status, len, "incomplete frame dropped");
+                tracing::debug!(
+                    ?status,
+                    payload = ?buffer.payload_type(),
+                    width = buffer.image_width(),
+                    height = buffer.image_height(),
+                    len,
+                    "incomplete frame dropped"
+                );
                 stream.push_buffer(buffer);
+                self.note_stream_buffers(stream);
                 continue;
             }
             let (mut data, taken) = self.pool.take(frame_len);
@@ -328,6 +359,7 @@ impl Worker {
             };
             let capture_ns = self.clock.capture_ns(buffer.timestamp(), host_ns);
             stream.push_buffer(buffer);
+            self.note_stream_buffers(stream);
             let frame = Frame {
                 seq: self.seq,
                 capture_ns,

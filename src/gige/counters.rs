@@ -48,6 +48,8 @@ pub struct GigeCounters {
     /// Buffers that came back incomplete (missing packets, timeout, size mismatch, ...) and
     /// went straight back to the stream.
     pub incomplete: AtomicU64,
+    /// Frames the camera sent that never arrived at all (gaps in its block ids).
+    pub missing: AtomicU64,
     /// Pops that waited `pop_timeout` without any buffer.
     pub timeouts: AtomicU64,
     /// Complete frames the sink refused (channel full): their buffers were recycled.
@@ -59,6 +61,9 @@ pub struct GigeCounters {
     /// Frame buffers (`Vec<u8>`) allocated because none came back for reuse; flat in steady
     /// state when the consumer returns its buffers.
     pub frame_allocations: AtomicU64,
+    /// Buffers queued in the Aravis stream (input + output) after the last push: equals the
+    /// configured pool minus those being filled; a steady fall would be a leak.
+    pub stream_buffers: AtomicU64,
 }
 
 /// A consistent-enough copy of the counters for reporting.
@@ -67,11 +72,13 @@ pub struct GigeSnapshot {
     pub state: CameraState,
     pub received: u64,
     pub incomplete: u64,
+    pub missing: u64,
     pub timeouts: u64,
     pub dropped: u64,
     pub reconnects: u64,
     pub connect_failures: u64,
     pub frame_allocations: u64,
+    pub stream_buffers: u64,
 }
 
 impl GigeCounters {
@@ -100,12 +107,28 @@ impl GigeCounters {
             state: self.state(),
             received: l(&self.received),
             incomplete: l(&self.incomplete),
+            missing: l(&self.missing),
             timeouts: l(&self.timeouts),
             dropped: l(&self.dropped),
             reconnects: l(&self.reconnects),
             connect_failures: l(&self.connect_failures),
             frame_allocations: l(&self.frame_allocations),
+            stream_buffers: l(&self.stream_buffers),
         }
+    }
+}
+
+/// How many frames the camera advanced from block id `last` to `id`: 1 for consecutive
+/// frames, more when frames went missing. GigE Vision 1.x block ids are 16 bits and skip 0 when
+/// they wrap (65535 → 1); 64-bit ids (GigE Vision 2) never wrap in practice. An id that goes
+/// backwards otherwise (camera restarted) counts as one step.
+pub fn block_id_step(last: u64, id: u64) -> u64 {
+    if id > last {
+        id - last
+    } else if last <= 0xFFFF && id >= 1 && last > 0xFF00 && id < 0x100 {
+        (0xFFFF - last) + id
+    } else {
+        1
     }
 }
 
@@ -131,6 +154,17 @@ mod tests {
             serde_json::to_string(&CameraState::CameraLost).unwrap(),
             "\"camera_lost\""
         );
+    }
+
+    #[test]
+    fn block_ids_step_and_wrap() {
+        assert_eq!(block_id_step(10, 11), 1);
+        assert_eq!(block_id_step(10, 13), 3);
+        assert_eq!(block_id_step(65535, 1), 1);
+        assert_eq!(block_id_step(65534, 2), 3);
+        assert_eq!(block_id_step(500, 3), 1); // camera restarted
+        assert_eq!(block_id_step(7, 7), 1);
+        assert_eq!(block_id_step(1 << 40, (1 << 40) + 2), 2);
     }
 
     #[test]

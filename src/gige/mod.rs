@@ -20,7 +20,7 @@ pub use config::{
     AutoOr, AutoWord, GigeConfig, GigeConfigError, GigeConfigParseError, GigePixelFormat, Roi,
     StreamConfig,
 };
-pub use counters::{CameraState, GigeCounters, GigeSnapshot};
+pub use counters::{block_id_step, CameraState, GigeCounters, GigeSnapshot};
 pub use pool::{FramePool, Recycler, Taken};
 
 #[cfg(feature = "camera")]
@@ -35,6 +35,10 @@ pub use acquire::{FrameSink, GigeSource, OnConnect};
 /// The Aravis bindings, for code that needs the camera object (e.g. an [`OnConnect`] hook).
 #[cfg(feature = "camera")]
 pub use aravis;
+/// The raw libaravis bindings, for what the safe bindings lack (e.g. the fake camera's fill
+/// pattern).
+#[cfg(feature = "camera")]
+pub use aravis_sys;
 #[cfg(feature = "camera")]
 pub use device::{enable_interface, list_cameras, matches, CameraInfo, SessionInfo};
 
