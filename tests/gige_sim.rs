@@ -12,9 +12,17 @@
 #![cfg(feature = "camera")]
 
 use crossbeam_channel::Receiver;
+use omnirow::detect::{Detection, Method, Row};
+use omnirow::estimate::Estimate;
+use omnirow::frame::ImageView;
 use omnirow::frame::{Frame, PixelFormat};
 use omnirow::gige::{AutoOr, CameraState, FrameSink, GigeConfig, GigePixelFormat, GigeSource, Roi};
+use omnirow::pipeline::{Pipeline, PipelineOptions, Processor};
+use omnirow::publish::{PublishError, Publisher};
+use omnirow::source::gige::CameraSource;
+use omnirow::source::SourceState;
 use std::process::{Child, Command, Stdio};
+use std::sync::Arc;
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
@@ -390,4 +398,107 @@ fn soak_with_packet_loss_counts_add_up_and_nothing_leaks() {
         "only {} of {buffers} buffers back in the stream",
         s.stream_buffers
     );
+}
+
+/// Reports the mean of the frame's first row as a row's support: proves the pixels went
+/// through the pipeline.
+struct MeanRow;
+
+impl Processor for MeanRow {
+    fn process(
+        &mut self,
+        view: &ImageView,
+        out: &mut Detection,
+    ) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
+        let w = view.width as usize;
+        let sum: u64 = view.data[..w].iter().map(|&b| b as u64).sum();
+        out.rows.clear();
+        out.rows.push(Row {
+            normal: nalgebra::Vector3::z(),
+            method: Method::Hough,
+            support: (sum / w as u64) as u32 + 1,
+        });
+        Ok(())
+    }
+}
+
+struct Collect(Arc<Mutex<Vec<Estimate>>>);
+
+impl Publisher for Collect {
+    fn name(&self) -> &str {
+        "collect"
+    }
+    fn publish(&mut self, e: &Estimate, _f: Option<&Arc<Frame>>) -> Result<(), PublishError> {
+        self.0
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .push(e.clone());
+        Ok(())
+    }
+}
+
+#[test]
+fn the_node_pipeline_runs_on_the_camera_and_survives_its_loss() {
+    let _g = SERIAL_TESTS.lock().unwrap_or_else(|e| e.into_inner());
+    let sim = Simulator::start("SIMNODE", None);
+    let cfg = config(&sim.serial, 2448, 2048);
+    let bound = cfg.loss_detection_bound();
+    let source = CameraSource::start(cfg, 2).unwrap();
+    let counters = source.counters();
+    let got = Arc::new(Mutex::new(Vec::new()));
+    let p = Pipeline::start(
+        Box::new(source),
+        vec![Box::new(MeanRow)],
+        vec![Box::new(Collect(got.clone()))],
+        None,
+        PipelineOptions::default(),
+    )
+    .unwrap();
+    let shared = p.shared();
+    let n_est = || got.lock().unwrap_or_else(|e| e.into_inner()).len();
+    wait_for(
+        "estimates from camera frames",
+        Duration::from_secs(15),
+        || n_est() >= 10,
+    );
+    assert_eq!(shared.source_state(), SourceState::Streaming);
+    {
+        let v = got.lock().unwrap();
+        for w in v.windows(2) {
+            assert!(w[1].seq > w[0].seq && w[1].capture_ns > w[0].capture_ns);
+        }
+        assert!(v.iter().all(|e| e.rows.len() == 1 && e.rows[0].support > 0));
+    }
+
+    drop(sim);
+    wait_for(
+        "camera_lost in the pipeline",
+        bound + Duration::from_secs(2),
+        || shared.source_state() == SourceState::Lost,
+    );
+    std::thread::sleep(Duration::from_secs(1));
+    assert!(
+        shared.alive(),
+        "pipeline threads stopped: {:?}",
+        shared.stuck_threads()
+    );
+    assert!(!p.is_finished());
+
+    let before = n_est();
+    let t0 = Instant::now();
+    let _sim = Simulator::start("SIMNODE", None);
+    wait_for(
+        "estimates after the camera returned",
+        Duration::from_secs(10),
+        || n_est() > before + 3,
+    );
+    println!(
+        "pipeline: estimates resumed {:?} after the simulator restarted; camera {:?}",
+        t0.elapsed(),
+        counters.snapshot()
+    );
+    assert_eq!(shared.source_state(), SourceState::Streaming);
+    p.request_stop();
+    let status = p.join().unwrap();
+    println!("pipeline status at the end: {status:?}");
 }

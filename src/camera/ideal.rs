@@ -71,7 +71,7 @@ fn fit_direct(alpha: impl Fn(f64) -> f64, rho_max: f64, degree: usize) -> Vec<f6
     ss
 }
 
-fn finish(ss: Vec<f64>, height: u32, width: u32, mask: FovMask) -> Calibration {
+fn finish(ss: Vec<f64>, fit_rho: f64, height: u32, width: u32, mask: FovMask) -> Calibration {
     let centre = ((height as f64 - 1.0) / 2.0, (width as f64 - 1.0) / 2.0);
     // A first model with a placeholder inverse gives the valid range; then fit the inverse.
     let probe = OcamModel::new(
@@ -82,7 +82,7 @@ fn finish(ss: Vec<f64>, height: u32, width: u32, mask: FovMask) -> Calibration {
         (height, width),
     )
     .expect("ideal direct polynomial is valid");
-    let invpol = OcamModel::fit_invpol(&ss, probe.rho_valid_max(), 12);
+    let invpol = OcamModel::fit_invpol(&ss, probe.rho_valid_max().min(fit_rho), 12);
     let model = OcamModel::new(ss, invpol, centre, (1.0, 0.0, 0.0), (height, width))
         .expect("ideal model is valid");
     Calibration {
@@ -100,6 +100,7 @@ pub fn ideal_fisheye(height: u32, width: u32) -> Calibration {
     let ss = fit_direct(|rho| k * rho, rim * 1.08, 7);
     finish(
         ss,
+        rim * 1.08,
         height,
         width,
         FovMask {
@@ -122,6 +123,7 @@ pub fn ideal_pal(height: u32, width: u32) -> Calibration {
     let ss = fit_direct(|rho| p * rho + q * rho * rho, rim * 1.05, 7);
     finish(
         ss,
+        rim * 1.05,
         height,
         width,
         FovMask {

@@ -160,8 +160,9 @@ impl OcamModel {
     }
 
     fn build_table(&mut self) -> Result<(), String> {
-        // Search rho up to the image diagonal (all of the sensor, from any centre) for the
-        // monotone range of theta(rho).
+        // Search rho up to twice the farthest image corner for the monotone range of
+        // theta(rho): the whole sensor, and directions beyond it (a vanishing point outside
+        // the image still has a pixel position).
         let h = self.height as f64;
         let w = self.width as f64;
         let corners = [
@@ -177,7 +178,7 @@ impl OcamModel {
                 (x * x + y * y).sqrt()
             })
             .fold(0.0, f64::max)
-            * 1.05;
+            * 2.0;
         let fine = 8 * TABLE_SAMPLES;
         let mut prev = self.theta_of_rho(0.0);
         let mut rho_max = rho_search;
@@ -593,5 +594,33 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("bad.txt:5") && e.contains("expected 2"), "{e}");
+    }
+}
+
+#[cfg(test)]
+mod parse_props {
+    use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        /// Arbitrary text never panics the parser: it parses or names a line.
+        #[test]
+        fn arbitrary_text_never_panics(text in "[0-9eE+\\-. #\\nx]{0,200}") {
+            if let Err(e) = OcamModel::parse(&text, Path::new("p.txt")) {
+                prop_assert!(e.to_string().starts_with("p.txt"));
+            }
+        }
+
+        /// Valid files with perturbed numbers either load or give an error, never a panic,
+        /// and anything that loads round-trips its centre.
+        #[test]
+        fn perturbed_files_load_or_error(a0 in -2000.0f64..10.0, a2 in -1e-2f64..1e-2, c in -2.0f64..2.0, h in 0u32..3000, w in 0u32..3000) {
+            let text = format!("3 {a0:e} 0 {a2:e}\n2 100 200\n{} {}\n{c} 0 0\n{h} {w}\n", h / 2, w / 2);
+            if let Ok(m) = OcamModel::parse(&text, Path::new("q.txt")) {
+                let r = m.cam2world(m.xc, m.yc);
+                let p = m.world2cam(&r).unwrap();
+                prop_assert!((p[0] - m.xc).abs() < 1e-6 && (p[1] - m.yc).abs() < 1e-6);
+            }
+        }
     }
 }

@@ -5,6 +5,9 @@
 
 mod calib;
 mod cameras;
+pub mod detect;
+mod eval;
+mod synth;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -22,6 +25,12 @@ pub enum Command {
     /// Inspect or produce calibrations.
     #[command(subcommand)]
     Calib(calib::CalibCommand),
+    /// Render a synthetic field image with its ground truth.
+    Synth(Box<synth::SynthArgs>),
+    /// Detect rows, their vanishing point, heading and tilt in images (one JSON line each).
+    Detect(detect::DetectArgs),
+    /// Regenerate the paper's evaluation on synthetic images: tables and plots.
+    Eval(eval::EvalArgs),
     /// List the GigE Vision / USB3 Vision cameras Aravis finds (needs the `camera` feature).
     Cameras(cameras::CamerasArgs),
 }
@@ -32,6 +41,9 @@ pub fn main() -> anyhow::Result<ExitCode> {
     init_logging();
     match cli.command {
         Command::Calib(c) => calib::run(c),
+        Command::Synth(a) => synth::run(*a),
+        Command::Detect(a) => detect::run(a),
+        Command::Eval(a) => eval::run(a),
         Command::Cameras(a) => cameras::run(a),
     }
 }
