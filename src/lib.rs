@@ -13,6 +13,7 @@ pub mod detect;
 pub mod estimate;
 pub mod eval;
 pub mod frame;
+pub mod gige;
 pub mod notify;
 pub mod pipeline;
 pub mod publish;

@@ -5,6 +5,7 @@
 
 mod calib;
 mod config;
+mod cameras;
 pub mod detect;
 mod eval;
 mod run;
@@ -45,6 +46,8 @@ pub enum Command {
         #[command(flatten)]
         args: Box<run::RunArgs>,
     },
+    /// List the GigE Vision / USB3 Vision cameras Aravis finds (needs the `camera` feature).
+    Cameras(cameras::CamerasArgs),
 }
 
 /// Parses the process arguments and runs the command.
@@ -62,6 +65,7 @@ pub fn main() -> anyhow::Result<ExitCode> {
         // The node sets up logging from its configuration.
         Command::Run(a) => run::run(*a, None),
         Command::Record { out, args } => run::run(*args, Some(out)),
+        Command::Cameras(a) => cameras::run(a),
     }
 }
 

@@ -7,6 +7,8 @@
 //! so the pipeline can always stop it and report its state.
 
 pub mod folder;
+#[cfg(feature = "camera")]
+pub mod gige;
 pub mod mcap_replay;
 pub mod synthetic;
 
