@@ -10,5 +10,6 @@ pub mod camera;
 pub mod cli;
 pub mod detect;
 pub mod frame;
+pub mod ros2;
 pub mod sphere;
 pub mod synth;
