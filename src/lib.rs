@@ -9,7 +9,14 @@
 pub mod camera;
 pub mod cli;
 pub mod detect;
+pub mod estimate;
+pub mod eval;
 pub mod frame;
+pub mod notify;
+pub mod pipeline;
+pub mod publish;
+pub mod record;
+pub mod source;
 pub mod ros2;
 pub mod sphere;
 pub mod synth;

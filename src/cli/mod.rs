@@ -4,6 +4,9 @@
 //! Each subcommand returns an exit code (`ExitCode`) or an error that `main` reports.
 
 mod calib;
+pub mod detect;
+mod eval;
+mod synth;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -21,6 +24,12 @@ pub enum Command {
     /// Inspect or produce calibrations.
     #[command(subcommand)]
     Calib(calib::CalibCommand),
+    /// Render a synthetic field image with its ground truth.
+    Synth(Box<synth::SynthArgs>),
+    /// Detect rows, their vanishing point, heading and tilt in images (one JSON line each).
+    Detect(detect::DetectArgs),
+    /// Regenerate the paper's evaluation on synthetic images: tables and plots.
+    Eval(eval::EvalArgs),
 }
 
 /// Parses the process arguments and runs the command.
@@ -29,6 +38,9 @@ pub fn main() -> anyhow::Result<ExitCode> {
     init_logging();
     match cli.command {
         Command::Calib(c) => calib::run(c),
+        Command::Synth(a) => synth::run(*a),
+        Command::Detect(a) => detect::run(a),
+        Command::Eval(a) => eval::run(a),
     }
 }
 

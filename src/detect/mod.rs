@@ -1,10 +1,77 @@
 //! The row detector: from one image to rows, their vanishing point, and heading and tilt.
 //!
 //! Owns the result types every stage shares ([`Row`], [`VanishingPoint`], [`Detection`]).
-//! The stages (mask, vegetation, Hough, edge, vanishing point, pose) live in their own files.
+//! The stages (mask, vegetation, Hough, edge, vanishing point, pose) live in their own files;
+//! [`Detector`] owns their buffers and runs them in order (prepare → Hough → vanishing point).
+
+pub mod detector;
+pub mod hough;
+pub mod mask;
+pub mod overlay;
+pub mod pose;
+pub mod smooth;
+pub mod threshold;
+pub mod vanishing;
+pub mod vegetation;
+
+pub use detector::{Detector, DetectorOptions, Points, Preparer, VanishingStage};
 
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
+
+/// An error from a detector stage. Names what was wrong with which input.
+#[derive(Debug, thiserror::Error)]
+pub enum DetectError {
+    #[error("method {0} is not available yet")]
+    MethodUnavailable(&'static str),
+    #[error("invalid detector option: {0}")]
+    Options(String),
+    #[error("image {height}x{width}: {problem}")]
+    Image {
+        height: u32,
+        width: u32,
+        problem: String,
+    },
+    #[error("calibration: {0}")]
+    Calibration(String),
+    #[error("mask: {0}")]
+    Mask(String),
+    #[error("buffer: {0}")]
+    Buffer(String),
+}
+
+impl Method {
+    /// The method's name as the command line and the JSON output spell it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Hough => "hough",
+            Method::Edge => "edge",
+            Method::Combined => "combined",
+        }
+    }
+}
+
+/// An owned single-channel 8-bit image (row-major, no padding), reused across frames.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct GreyImage {
+    pub width: usize,
+    pub height: usize,
+    pub data: Vec<u8>,
+}
+
+impl GreyImage {
+    /// Sets the size; allocates only when the buffer must grow.
+    pub fn resize(&mut self, width: usize, height: usize) {
+        self.width = width;
+        self.height = height;
+        self.data.resize(width * height, 0);
+    }
+
+    #[inline]
+    pub fn get(&self, row: usize, col: usize) -> u8 {
+        self.data[row * self.width + col]
+    }
+}
 
 /// Which method found a row (or produced a detection).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]

@@ -1,0 +1,119 @@
+//! `omnirow eval`: the paper's experiments regenerated on synthetic images and scored.
+
+use crate::camera::Calibration;
+use crate::detect::Method;
+use crate::eval::{self, EvalOptions, Lens};
+use anyhow::Context;
+use clap::Args;
+use std::io::{IsTerminal, Write};
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+#[derive(Debug, Args)]
+pub struct EvalArgs {
+    /// Folder for README.md (the tables), the PNG plots and outcomes.jsonl.
+    #[arg(long, default_value = "eval-out")]
+    pub out: PathBuf,
+    /// A run of under a minute: few images, half resolution.
+    #[arg(long)]
+    pub quick: bool,
+    /// Images for Table I (default 100; 8 with --quick).
+    #[arg(long)]
+    pub images: Option<usize>,
+    /// Images per lens for Table II (default 100; 6 with --quick).
+    #[arg(long)]
+    pub table2_images: Option<usize>,
+    /// Images per lens and plant distance for figures 8 and 9 (default 10; 2 with --quick).
+    #[arg(long)]
+    pub distance_images: Option<usize>,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Calibration files to evaluate on (OCamCalib or TOML), repeatable. Default: omnirow's
+    /// ideal 185° fisheye and panoramic annular lens for the GC2450C.
+    #[arg(long = "lens")]
+    pub lenses: Vec<PathBuf>,
+    /// Resolution divisor: 1 full, 2 half (default 1; 2 with --quick).
+    #[arg(long)]
+    pub scale: Option<f64>,
+    /// Methods to score, comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "edge,hough,combined")]
+    pub methods: Vec<String>,
+}
+
+pub fn run(a: EvalArgs) -> anyhow::Result<ExitCode> {
+    let lenses = if a.lenses.is_empty() {
+        Lens::builtin()
+    } else {
+        a.lenses
+            .iter()
+            .map(|p| {
+                Ok(Lens {
+                    name: p
+                        .file_stem()
+                        .map(|s| s.to_string_lossy().into_owned())
+                        .unwrap_or_else(|| p.display().to_string()),
+                    calibration: Calibration::load(p)?,
+                })
+            })
+            .collect::<anyhow::Result<Vec<_>>>()?
+    };
+    let mut opts = if a.quick {
+        EvalOptions::quick(lenses)
+    } else {
+        EvalOptions::full(lenses)
+    };
+    opts.seed = a.seed;
+    if let Some(n) = a.images {
+        opts.table1_images = n;
+    }
+    if let Some(n) = a.table2_images {
+        opts.table2_images = n;
+    }
+    if let Some(n) = a.distance_images {
+        opts.distance_images = n;
+    }
+    if let Some(s) = a.scale {
+        anyhow::ensure!(s.is_finite() && s > 0.0, "--scale {s} must be positive");
+        opts.scale = s;
+    }
+    opts.methods = a
+        .methods
+        .iter()
+        .map(|m| match m.trim() {
+            "edge" => Ok(Method::Edge),
+            "hough" => Ok(Method::Hough),
+            "combined" => Ok(Method::Combined),
+            other => anyhow::bail!("--methods: unknown method '{other}' (edge, hough, combined)"),
+        })
+        .collect::<anyhow::Result<_>>()?;
+    let tty = std::io::stderr().is_terminal();
+    let started = std::time::Instant::now();
+    let mut last_pct = usize::MAX;
+    let results = eval::run(&opts, |done, total| {
+        let pct = done * 100 / total.max(1);
+        let mut err = std::io::stderr();
+        if tty {
+            let bar = "#".repeat(pct / 4) + &" ".repeat(25 - pct / 4);
+            let _ = write!(
+                err,
+                "\reval [{bar}] {done}/{total} images, {:.0} s",
+                started.elapsed().as_secs_f64()
+            );
+            if done == total {
+                let _ = writeln!(err);
+            }
+        } else if pct / 10 != last_pct / 10 || done == total {
+            let _ = writeln!(err, "eval: {done}/{total} images ({pct}%)");
+        }
+        last_pct = pct;
+    })?;
+    let command: Vec<String> = std::env::args().collect();
+    let command = format!("omnirow {}", command[1..].join(" "));
+    let files = eval::report::write(&results, &a.out, &command)
+        .with_context(|| format!("writing the report into {}", a.out.display()))?;
+    print!("{}", eval::report::markdown(&results, &command));
+    for f in files {
+        eprintln!("eval: wrote {}", f.display());
+    }
+    Ok(ExitCode::SUCCESS)
+}

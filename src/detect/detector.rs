@@ -1,0 +1,555 @@
+//! The detector: one image in, rows, vanishing point, heading and tilt out.
+//!
+//! Owns every buffer the stages need and the per-image-size setup (the calibration rescaled
+//! to the image, the field-of-view mask found from the image when the calibration has none,
+//! the mask and the per-pixel ray table), rebuilt only when the image's size or pixel format
+//! changes. The hot path allocates nothing once warmed up. The three stages are separate
+//! types so that a pipeline can run them on threads: [`Preparer`] (vegetation, smoothing,
+//! threshold → [`Points`]), [`HoughRows`] (points → rows) and [`VanishingStage`] (rows →
+//! vanishing point, heading, tilt, quality). [`Detector`] runs them in order.
+
+use super::hough::{HoughOptions, HoughResult, HoughRows};
+use super::mask::{build_mask, find_fov, MaskOptions, MaskResult};
+use super::pose::heading_tilt;
+use super::smooth::{Gaussian, SmoothOptions};
+use super::threshold::{keep_brightest, ThresholdOptions, ThresholdResult};
+use super::vanishing::{VanishingFinder, VanishingOptions, VanishingResult};
+use super::vegetation::{vegetation_image, working_factor, VegetationOptions};
+use super::{DetectError, Detection, GreyImage, Method};
+use crate::camera::{Calibration, FovMask};
+use crate::frame::{ImageView, PixelFormat};
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+use std::time::{Duration, Instant};
+
+/// Whether full-resolution Mono8/RGB8 input is binned 2×2 before detection.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Binning {
+    /// Bin when the image has more than `auto_bin_above_px` pixels (and even sides).
+    #[default]
+    Auto,
+    Off,
+    Half,
+}
+
+/// Everything the detector can be told.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DetectorOptions {
+    pub method: Method,
+    /// Largest expected tilt of the robot (degrees): bounds the sky mask and the search for
+    /// the vanishing point.
+    pub max_tilt_deg: f64,
+    pub binning: Binning,
+    pub auto_bin_above_px: u64,
+    pub vegetation: VegetationOptions,
+    pub mask: MaskOptions,
+    pub smooth: SmoothOptions,
+    pub threshold: ThresholdOptions,
+    pub hough: HoughOptions,
+    pub vanishing: VanishingOptions,
+}
+
+impl Default for DetectorOptions {
+    fn default() -> Self {
+        DetectorOptions {
+            method: Method::Hough,
+            max_tilt_deg: 15.0,
+            binning: Binning::Auto,
+            auto_bin_above_px: 1_600_000,
+            vegetation: VegetationOptions::default(),
+            mask: MaskOptions::default(),
+            smooth: SmoothOptions::default(),
+            threshold: ThresholdOptions::default(),
+            hough: HoughOptions::default(),
+            vanishing: VanishingOptions::default(),
+        }
+    }
+}
+
+/// The kept points handed from [`Preparer`] to [`HoughRows`]: unit rays (camera frame) and
+/// their weights (smoothed vegetation value).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Points {
+    pub rays: Vec<[f32; 3]>,
+    pub weights: Vec<f32>,
+}
+
+/// What the preparation stage did.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct PrepareResult {
+    pub threshold: ThresholdResult,
+    /// Size reduction from the image to the working image (1 or 2).
+    pub working_factor: u32,
+    /// True when this image caused the per-size setup to be rebuilt.
+    pub setup_rebuilt: bool,
+}
+
+/// Per-image-size setup.
+#[derive(Debug, Clone)]
+struct Setup {
+    width: u32,
+    height: u32,
+    format: PixelFormat,
+    bin2: bool,
+    factor: u32,
+    view_cal: Calibration,
+    work_cal: Calibration,
+    mask: Vec<u8>,
+    rays: Vec<[f32; 3]>,
+    mask_result: MaskResult,
+}
+
+/// Stage 1: image → vegetation → smoothing → threshold → kept rays.
+#[derive(Debug, Clone)]
+pub struct Preparer {
+    cal: Calibration,
+    /// The field-of-view mask is found from the image (the calibration has none).
+    fov_auto: bool,
+    opts: DetectorOptions,
+    gauss: Gaussian,
+    user_mask: Option<GreyImage>,
+    setup: Option<Setup>,
+    veg: GreyImage,
+    smoothed: GreyImage,
+    tmp: Vec<u16>,
+    kept: Vec<u32>,
+}
+
+impl Preparer {
+    pub fn new(cal: &Calibration, opts: &DetectorOptions) -> Result<Self, DetectError> {
+        opts.mask.validate()?;
+        if !(opts.max_tilt_deg > 0.0 && opts.max_tilt_deg <= 80.0) {
+            return Err(DetectError::Options(format!(
+                "max_tilt_deg = {} must be within (0, 80]",
+                opts.max_tilt_deg
+            )));
+        }
+        if let Some(m) = &cal.mask {
+            m.validate().map_err(DetectError::Calibration)?;
+        }
+        Ok(Preparer {
+            fov_auto: cal.mask.is_none(),
+            cal: cal.clone(),
+            opts: opts.clone(),
+            gauss: Gaussian::new(&opts.smooth)?,
+            user_mask: None,
+            setup: None,
+            veg: GreyImage::default(),
+            smoothed: GreyImage::default(),
+            tmp: Vec::new(),
+            kept: Vec::new(),
+        })
+    }
+
+    /// Sets an optional user mask image (white = use), at any resolution with the image's
+    /// aspect. Takes effect at the next image.
+    pub fn set_user_mask(&mut self, mask: Option<GreyImage>) {
+        self.user_mask = mask;
+        self.setup = None;
+    }
+
+    /// Replaces the field-of-view mask (calibration's own pixels); `None` = find it from the
+    /// next image if the calibration has none. Takes effect at the next image.
+    pub fn set_fov_mask(&mut self, mask: Option<FovMask>) {
+        self.fov_auto = mask.is_none();
+        self.cal.mask = mask;
+        self.setup = None;
+    }
+
+    /// When the field-of-view mask is found from the image, finds it again in `view` and
+    /// rebuilds the setup if it moved by more than a pixel (for a sequence of images from
+    /// different cameras). Returns whether the setup was rebuilt.
+    pub fn refind_fov(&mut self, view: &ImageView) -> Result<bool, DetectError> {
+        if !self.fov_auto {
+            return Ok(false);
+        }
+        let Some(s) = &self.setup else {
+            return Ok(false);
+        };
+        if (s.width, s.height, s.format) != (view.width, view.height, view.format) {
+            return Ok(false);
+        }
+        let m = find_fov(view, (s.view_cal.model.xc, s.view_cal.model.yc))?;
+        let old = s.view_cal.mask.unwrap_or(m);
+        if (old.inner_radius_px - m.inner_radius_px).abs() > 1.0
+            || (old.outer_radius_px - m.outer_radius_px).abs() > 1.0
+        {
+            self.setup = None;
+            self.ensure_setup(view)?;
+            return Ok(true);
+        }
+        Ok(false)
+    }
+
+    /// The calibration as given.
+    pub fn calibration(&self) -> &Calibration {
+        &self.cal
+    }
+
+    /// The calibration at the last image's resolution (with its field-of-view mask).
+    pub fn view_calibration(&self) -> Option<&Calibration> {
+        self.setup.as_ref().map(|s| &s.view_cal)
+    }
+
+    /// The calibration at the working resolution.
+    pub fn working_calibration(&self) -> Option<&Calibration> {
+        self.setup.as_ref().map(|s| &s.work_cal)
+    }
+
+    /// The mask of the working image (0xFF = use) and its counts.
+    pub fn mask(&self) -> Option<(&[u8], MaskResult)> {
+        self.setup.as_ref().map(|s| (&s.mask[..], s.mask_result))
+    }
+
+    /// The last vegetation image and its smoothed version (working resolution).
+    pub fn vegetation(&self) -> (&GreyImage, &GreyImage) {
+        (&self.veg, &self.smoothed)
+    }
+
+    fn ensure_setup(&mut self, view: &ImageView) -> Result<bool, DetectError> {
+        if let Some(s) = &self.setup {
+            if (s.width, s.height, s.format) == (view.width, view.height, view.format) {
+                return Ok(false);
+            }
+        }
+        let img_err = |problem: String| DetectError::Image {
+            height: view.height,
+            width: view.width,
+            problem,
+        };
+        let mut view_cal = self
+            .cal
+            .rescaled_to(view.height, view.width)
+            .map_err(img_err)?;
+        if view_cal.mask.is_none() {
+            let m = find_fov(view, (view_cal.model.xc, view_cal.model.yc))?;
+            tracing::info!(
+                inner_px = m.inner_radius_px,
+                outer_px = m.outer_radius_px,
+                "field-of-view mask found from the image"
+            );
+            view_cal.mask = Some(m);
+        }
+        let pixels = view.width as u64 * view.height as u64;
+        let even = view.width % 2 == 0 && view.height % 2 == 0;
+        let bin2 = match self.opts.binning {
+            Binning::Off => false,
+            Binning::Half => true,
+            Binning::Auto => pixels > self.opts.auto_bin_above_px && even,
+        };
+        let factor = working_factor(view.width, view.height, view.format, bin2)?;
+        let work_cal = if factor == 1 {
+            view_cal.clone()
+        } else {
+            view_cal.rescaled(factor as f64).map_err(img_err)?
+        };
+        let mut mask = Vec::new();
+        let mut rays = Vec::new();
+        let mask_result = build_mask(
+            &work_cal,
+            &self.opts.mask,
+            self.opts.max_tilt_deg,
+            self.user_mask.as_ref(),
+            &mut mask,
+            &mut rays,
+        )?;
+        let n = mask.len();
+        self.veg.resize(
+            work_cal.model.width as usize,
+            work_cal.model.height as usize,
+        );
+        self.smoothed.resize(
+            work_cal.model.width as usize,
+            work_cal.model.height as usize,
+        );
+        self.tmp.resize(n, 0);
+        self.kept.reserve(self.opts.threshold.target_points + 1);
+        tracing::debug!(
+            width = view.width,
+            height = view.height,
+            factor,
+            valid = mask_result.valid,
+            "detector setup rebuilt"
+        );
+        self.setup = Some(Setup {
+            width: view.width,
+            height: view.height,
+            format: view.format,
+            bin2,
+            factor,
+            view_cal,
+            work_cal,
+            mask,
+            rays,
+            mask_result,
+        });
+        Ok(true)
+    }
+
+    /// Runs the stage on one image, writing the kept points into `points`.
+    pub fn run(
+        &mut self,
+        view: &ImageView,
+        points: &mut Points,
+    ) -> Result<PrepareResult, DetectError> {
+        let rebuilt = self.ensure_setup(view)?;
+        let s = self.setup.as_ref().expect("setup just ensured");
+        vegetation_image(view, &self.opts.vegetation, s.bin2, &mut self.veg)?;
+        let (w, h) = (self.veg.width, self.veg.height);
+        self.gauss
+            .apply(&self.veg.data, w, h, &mut self.tmp, &mut self.smoothed.data)?;
+        let thr = keep_brightest(
+            &self.smoothed.data,
+            &s.mask,
+            &self.opts.threshold,
+            &mut self.kept,
+        )?;
+        points.rays.clear();
+        points.weights.clear();
+        for &i in &self.kept {
+            points.rays.push(s.rays[i as usize]);
+            points.weights.push(self.smoothed.data[i as usize] as f32);
+        }
+        Ok(PrepareResult {
+            threshold: thr,
+            working_factor: s.factor,
+            setup_rebuilt: rebuilt,
+        })
+    }
+}
+
+/// Stage 3: rows → vanishing point → heading, tilt and quality, into a [`Detection`].
+#[derive(Debug, Clone)]
+pub struct VanishingStage {
+    finder: VanishingFinder,
+    mounting: crate::camera::Mounting,
+    weights: Vec<f64>,
+    inliers: Vec<bool>,
+}
+
+impl VanishingStage {
+    pub fn new(cal: &Calibration, opts: &DetectorOptions) -> Result<Self, DetectError> {
+        Ok(VanishingStage {
+            finder: VanishingFinder::new(opts.vanishing, opts.max_tilt_deg, &cal.mounting)?,
+            mounting: cal.mounting,
+            weights: Vec::with_capacity(64),
+            inliers: Vec::with_capacity(64),
+        })
+    }
+
+    /// Finds the vanishing point of `out.rows` (weighted by `weights`, or by each row's
+    /// support when `None`) and fills the rest of `out`.
+    pub fn run(
+        &mut self,
+        weights: Option<&[f64]>,
+        out: &mut Detection,
+    ) -> Result<VanishingResult, DetectError> {
+        let w: &[f64] = match weights {
+            Some(w) => w,
+            None => {
+                super::vanishing::support_weights(&out.rows, &mut self.weights);
+                &self.weights
+            }
+        };
+        let r = self.finder.find(&out.rows, w, &mut self.inliers)?;
+        out.vanishing_point = r.vanishing_point;
+        out.quality = r.quality;
+        match r.vanishing_point {
+            Some(vp) => {
+                let ht = heading_tilt(&vp.direction, &self.mounting);
+                out.heading_rad = Some(ht.heading_rad);
+                out.tilt_rad = Some(ht.tilt_rad);
+            }
+            None => {
+                out.heading_rad = None;
+                out.tilt_rad = None;
+            }
+        }
+        Ok(r)
+    }
+
+    /// Per row of the last run: whether it agrees with the vanishing point.
+    pub fn inliers(&self) -> &[bool] {
+        &self.inliers
+    }
+}
+
+/// Time spent in each stage of the last image.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct StageTimes {
+    pub prepare: Duration,
+    pub hough: Duration,
+    pub vanishing: Duration,
+}
+
+impl StageTimes {
+    pub fn total(&self) -> Duration {
+        self.prepare + self.hough + self.vanishing
+    }
+}
+
+/// The whole detector (Hough method).
+#[derive(Debug, Clone)]
+pub struct Detector {
+    opts: DetectorOptions,
+    prep: Preparer,
+    hough: HoughRows,
+    vanish: VanishingStage,
+    points: Points,
+    times: StageTimes,
+    last_prepare: PrepareResult,
+    last_hough: HoughResult,
+}
+
+impl Detector {
+    pub fn new(cal: &Calibration, opts: DetectorOptions) -> Result<Self, DetectError> {
+        match opts.method {
+            Method::Hough => {}
+            // The edge and combined methods are being built in src/detect/edge/.
+            other => return Err(DetectError::MethodUnavailable(other.name())),
+        }
+        Ok(Detector {
+            prep: Preparer::new(cal, &opts)?,
+            hough: HoughRows::new(opts.hough)?,
+            vanish: VanishingStage::new(cal, &opts)?,
+            points: Points {
+                rays: Vec::with_capacity(opts.threshold.target_points + 1),
+                weights: Vec::with_capacity(opts.threshold.target_points + 1),
+            },
+            opts,
+            times: StageTimes::default(),
+            last_prepare: PrepareResult::default(),
+            last_hough: HoughResult::default(),
+        })
+    }
+
+    pub fn options(&self) -> &DetectorOptions {
+        &self.opts
+    }
+
+    /// Detects rows, the vanishing point, heading and tilt in one image, into `out`.
+    pub fn process(&mut self, view: &ImageView, out: &mut Detection) -> Result<(), DetectError> {
+        let t0 = Instant::now();
+        self.last_prepare = self.prep.run(view, &mut self.points)?;
+        let t1 = Instant::now();
+        out.rows.clear();
+        self.last_hough =
+            self.hough
+                .find_rows(&self.points.rays, &self.points.weights, &mut out.rows)?;
+        let t2 = Instant::now();
+        self.vanish.run(None, out)?;
+        let t3 = Instant::now();
+        self.times = StageTimes {
+            prepare: t1 - t0,
+            hough: t2 - t1,
+            vanishing: t3 - t2,
+        };
+        Ok(())
+    }
+
+    /// The stages, for running them separately (e.g. pipelined on threads).
+    pub fn into_stages(self) -> (Preparer, HoughRows, VanishingStage) {
+        (self.prep, self.hough, self.vanish)
+    }
+
+    pub fn preparer(&self) -> &Preparer {
+        &self.prep
+    }
+
+    pub fn preparer_mut(&mut self) -> &mut Preparer {
+        &mut self.prep
+    }
+
+    pub fn hough(&self) -> &HoughRows {
+        &self.hough
+    }
+
+    pub fn vanishing_stage(&self) -> &VanishingStage {
+        &self.vanish
+    }
+
+    /// The points kept from the last image.
+    pub fn points(&self) -> &Points {
+        &self.points
+    }
+
+    pub fn last_times(&self) -> StageTimes {
+        self.times
+    }
+
+    pub fn last_prepare(&self) -> PrepareResult {
+        self.last_prepare
+    }
+
+    pub fn last_hough(&self) -> HoughResult {
+        self.last_hough
+    }
+
+    /// The calibration at the last image's resolution.
+    pub fn view_calibration(&self) -> Option<&Calibration> {
+        self.prep.view_calibration()
+    }
+}
+
+/// The pixel (row, col) of a direction (either sign) in an image described by `cal`:
+/// the sign whose pixel lies inside the field of view, else inside the image, else `None`.
+pub fn direction_to_pixel(cal: &Calibration, dir: &Vector3<f64>) -> Option<[f64; 2]> {
+    for d in [*dir, -*dir] {
+        if let Some(p) = cal.ray_to_pixel_in_fov(&d) {
+            return Some(p);
+        }
+    }
+    let (h, w) = (cal.model.height as f64, cal.model.width as f64);
+    [*dir, -*dir].iter().find_map(|d| {
+        cal.model
+            .world2cam(d)
+            .filter(|p| p[0] >= -0.5 && p[1] >= -0.5 && p[0] < h - 0.5 && p[1] < w - 0.5)
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::camera::ideal_fisheye;
+
+    #[test]
+    fn edge_and_combined_say_not_available() {
+        let cal = ideal_fisheye(100, 120);
+        for m in [Method::Edge, Method::Combined] {
+            let e = Detector::new(
+                &cal,
+                DetectorOptions {
+                    method: m,
+                    ..Default::default()
+                },
+            )
+            .unwrap_err()
+            .to_string();
+            assert_eq!(e, format!("method {} is not available yet", m.name()));
+        }
+    }
+
+    #[test]
+    fn rejects_images_not_a_uniform_scale_of_the_calibration() {
+        let cal = ideal_fisheye(100, 120);
+        let mut d = Detector::new(&cal, DetectorOptions::default()).unwrap();
+        let data = vec![0u8; 100 * 100];
+        let v = ImageView::new(100, 100, PixelFormat::Mono8, &data).unwrap();
+        let mut out = Detection::default();
+        let e = d.process(&v, &mut out).unwrap_err().to_string();
+        assert!(e.contains("not the calibration"), "{e}");
+    }
+
+    #[test]
+    fn options_reject_unknown_keys() {
+        let e = toml::from_str::<DetectorOptions>("max_tilt_deg = 10\nbogus = 1\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("bogus"), "{e}");
+        let o: DetectorOptions = toml::from_str("[hough]\nphi_bins = 60\n").unwrap();
+        assert_eq!(o.hough.phi_bins, 60);
+        assert_eq!(o.hough.theta_bins, 90);
+    }
+}

@@ -1,0 +1,566 @@
+//! The spherical Hough transform for rows (paper II-D, eq. 3–4), with the line-fitting step.
+//!
+//! Owns the accumulator over the normals n(φ, θ) = (sin φ cos θ, sin φ sin θ, cos φ) of great
+//! circles, its voting, the peaks and their refinement. A normal and its opposite are the same
+//! row, so the accumulator covers φ ∈ [0, π) × θ ∈ [0, π) once (90 × 90 cells by default, 2° each);
+//! it wraps in φ at the poles ((−ε, θ) ≡ (π − ε, θ)) and in θ with a flip ((φ, θ + π) ≡ (π − φ, θ)).
+//!
+//! Each ray p votes for every great circle through it: for θ, eq. 4 gives
+//! φ(θ) = atan2(−p_z, p_x cos θ + p_y sin θ). The curve is rasterised column by column (φ at both
+//! edges of each θ column and every cell in between), so a ray casts one vote in every cell
+//! its curve crosses even where the curve is steep — near the poles the paper's one-vote-per-θ
+//! sampling would miss cells. Peaks are local maxima under non-maximum suppression; each is refined by
+//! fitting the normal to the rays near its great circle ([`Scatter`], the smallest eigenvector
+//! of their weighted scatter matrix), iterated with a tolerance that shrinks to three times
+//! the RMS distance of the points; rows that converge onto the same great circle are merged.
+
+use super::{DetectError, Method, Row};
+use crate::sphere::{axis_angle, canonical, from_phi_theta, Scatter};
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+use std::f32::consts::PI as PI32;
+
+/// Options of the row Hough transform.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct HoughOptions {
+    /// Accumulator cells along φ (0..π).
+    pub phi_bins: usize,
+    /// Accumulator cells along θ (0..π; θ + π is the same row).
+    pub theta_bins: usize,
+    /// At most this many rows are reported (strongest first).
+    pub max_rows: usize,
+    /// Peaks with fewer votes, and refined rows with less support, are dropped.
+    pub min_support: u32,
+    /// Peaks below this fraction of the highest peak are dropped.
+    pub min_peak_fraction: f64,
+    /// Half-size (cells) of the non-maximum-suppression window.
+    pub nms_radius: usize,
+    /// Iterations of the refinement fit.
+    pub refine_iterations: usize,
+    /// The refinement never narrows its band below this half-width (degrees).
+    pub min_tolerance_deg: f64,
+    /// Refined rows closer than this (degrees between normals) are one row.
+    pub merge_angle_deg: f64,
+    /// A row whose points do not single out a great circle (ratio of the two smallest
+    /// eigenvalues of their scatter matrix above this) is dropped.
+    pub max_degeneracy: f64,
+}
+
+impl Default for HoughOptions {
+    fn default() -> Self {
+        HoughOptions {
+            phi_bins: 90,
+            theta_bins: 90,
+            max_rows: 12,
+            min_support: 40,
+            min_peak_fraction: 0.1,
+            nms_radius: 2,
+            refine_iterations: 12,
+            min_tolerance_deg: 0.15,
+            merge_angle_deg: 1.0,
+            max_degeneracy: 0.2,
+        }
+    }
+}
+
+impl HoughOptions {
+    pub fn validate(&self) -> Result<(), DetectError> {
+        let bad = |m: String| Err(DetectError::Options(m));
+        if !(4..=2048).contains(&self.phi_bins) || !(4..=2048).contains(&self.theta_bins) {
+            return bad(format!(
+                "hough accumulator {}x{} must have 4..=2048 cells on each side",
+                self.phi_bins, self.theta_bins
+            ));
+        }
+        if self.max_rows == 0 || self.max_rows > 256 {
+            return bad(format!(
+                "hough.max_rows = {} must be 1..=256",
+                self.max_rows
+            ));
+        }
+        if !(0.0..=1.0).contains(&self.min_peak_fraction) {
+            return bad(format!(
+                "hough.min_peak_fraction = {} must be within 0..=1",
+                self.min_peak_fraction
+            ));
+        }
+        if !(self.min_tolerance_deg > 0.0 && self.min_tolerance_deg < 10.0) {
+            return bad(format!(
+                "hough.min_tolerance_deg = {} must be within (0, 10)",
+                self.min_tolerance_deg
+            ));
+        }
+        if !(self.merge_angle_deg >= 0.0 && self.merge_angle_deg < 45.0) {
+            return bad(format!(
+                "hough.merge_angle_deg = {} must be within [0, 45)",
+                self.merge_angle_deg
+            ));
+        }
+        if !(self.max_degeneracy > 0.0 && self.max_degeneracy <= 1.0) {
+            return bad(format!(
+                "hough.max_degeneracy = {} must be within (0, 1]",
+                self.max_degeneracy
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Statistics of one run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct HoughResult {
+    /// Points that voted.
+    pub points: usize,
+    /// Peaks refined.
+    pub peaks: usize,
+    /// Highest accumulator cell.
+    pub max_votes: u32,
+    /// Rows appended.
+    pub rows: usize,
+}
+
+/// The row Hough transform with its accumulator and scratch buffers (allocated once).
+#[derive(Debug, Clone)]
+pub struct HoughRows {
+    opts: HoughOptions,
+    /// cos θ and sin θ at the θ column edges (theta_bins + 1 values).
+    cos_e: Vec<f32>,
+    sin_e: Vec<f32>,
+    /// φ (in cells) at each edge for the current ray.
+    edge: Vec<f32>,
+    /// Votes, column-major: acc[k * phi_bins + j] for θ column k, φ cell j.
+    acc: Vec<u32>,
+    peaks: Vec<(u32, u32)>,
+    sel: Vec<u32>,
+    found: Vec<Row>,
+}
+
+/// atan2 for f32 with an error below 1e-5 rad (enough to pick a 2° cell), branch-light.
+#[inline]
+pub fn fast_atan2(y: f32, x: f32) -> f32 {
+    let ax = x.abs();
+    let ay = y.abs();
+    let (mn, mx) = if ax < ay { (ax, ay) } else { (ay, ax) };
+    let a = if mx > 0.0 { mn / mx } else { 0.0 };
+    let s = a * a;
+    let mut r = ((((-0.013_480_47 * s + 0.057_477_314) * s - 0.121_239_07) * s + 0.195_635_93) * s
+        - 0.332_994_96)
+        * s
+        * a
+        + a;
+    if ay > ax {
+        r = std::f32::consts::FRAC_PI_2 - r;
+    }
+    if x < 0.0 {
+        r = PI32 - r;
+    }
+    if y < 0.0 {
+        -r
+    } else {
+        r
+    }
+}
+
+impl HoughRows {
+    pub fn new(opts: HoughOptions) -> Result<Self, DetectError> {
+        opts.validate()?;
+        let t = opts.theta_bins;
+        let (cos_e, sin_e) = (0..=t)
+            .map(|k| {
+                let th = k as f64 * std::f64::consts::PI / t as f64;
+                (th.cos() as f32, th.sin() as f32)
+            })
+            .unzip();
+        Ok(HoughRows {
+            opts,
+            cos_e,
+            sin_e,
+            edge: vec![0.0; t + 1],
+            acc: vec![0; t * opts.phi_bins],
+            peaks: Vec::with_capacity(t * opts.phi_bins),
+            sel: Vec::new(),
+            found: Vec::with_capacity(4 * opts.max_rows),
+        })
+    }
+
+    pub fn options(&self) -> &HoughOptions {
+        &self.opts
+    }
+
+    /// The accumulator of the last run, column-major (θ column × φ cells).
+    pub fn accumulator(&self) -> &[u32] {
+        &self.acc
+    }
+
+    /// The normal at the centre of cell (θ column k, φ cell j).
+    pub fn cell_normal(&self, k: usize, j: usize) -> Vector3<f64> {
+        let dphi = std::f64::consts::PI / self.opts.phi_bins as f64;
+        let dth = std::f64::consts::PI / self.opts.theta_bins as f64;
+        from_phi_theta((j as f64 + 0.5) * dphi, (k as f64 + 0.5) * dth)
+    }
+
+    /// The cell (θ column, φ cell) of a normal (either sign).
+    pub fn cell_of(&self, n: &Vector3<f64>) -> (usize, usize) {
+        let (mut phi, mut th) = crate::sphere::to_phi_theta(n);
+        if th >= std::f64::consts::PI {
+            th -= std::f64::consts::PI;
+            phi = std::f64::consts::PI - phi;
+        }
+        let p = self.opts.phi_bins;
+        let t = self.opts.theta_bins;
+        let j = ((phi / std::f64::consts::PI * p as f64) as usize).min(p - 1);
+        let k = ((th / std::f64::consts::PI * t as f64) as usize).min(t - 1);
+        (k, j)
+    }
+
+    /// Casts the votes of all rays.
+    fn vote(&mut self, rays: &[[f32; 3]]) {
+        let p = self.opts.phi_bins;
+        let t = self.opts.theta_bins;
+        let scale = p as f32 / PI32;
+        let pmax = (p - 1) as f32;
+        self.acc.fill(0);
+        for r in rays {
+            let (px, py, mz) = (r[0], r[1], -r[2]);
+            for ((e, &c), &s) in self.edge.iter_mut().zip(&self.cos_e).zip(&self.sin_e) {
+                let mut phi = fast_atan2(mz, px * c + py * s);
+                if phi < 0.0 {
+                    phi += PI32;
+                }
+                *e = (phi * scale).min(pmax);
+            }
+            for k in 0..t {
+                let (a, b) = (self.edge[k] as usize, self.edge[k + 1] as usize);
+                let (lo, hi) = if a <= b { (a, b) } else { (b, a) };
+                let col = &mut self.acc[k * p..(k + 1) * p];
+                // φ(θ) is continuous for a fixed ray (atan2 of a fixed-sign numerator), so the
+                // cells between the two edges are exactly those the curve crosses; a ray on the
+                // accumulator's equator fills a whole column (its meridian).
+                for v in &mut col[lo..=hi] {
+                    *v += 1;
+                }
+            }
+        }
+    }
+
+    /// Neighbour of cell (k, j) at offset (dk, dj) on the wrapped accumulator.
+    #[inline]
+    fn neighbour(&self, k: usize, j: usize, dk: isize, dj: isize) -> usize {
+        let p = self.opts.phi_bins as isize;
+        let t = self.opts.theta_bins as isize;
+        let mut jj = (j as isize + dj).rem_euclid(p);
+        let kk = k as isize + dk;
+        let kk = if kk < 0 || kk >= t {
+            jj = p - 1 - jj;
+            kk.rem_euclid(t)
+        } else {
+            kk
+        };
+        (kk * p + jj) as usize
+    }
+
+    fn find_peaks(&mut self) -> u32 {
+        let p = self.opts.phi_bins;
+        let t = self.opts.theta_bins;
+        let max = self.acc.iter().copied().max().unwrap_or(0);
+        let floor = (self.opts.min_support.max(1))
+            .max((self.opts.min_peak_fraction * max as f64).ceil() as u32);
+        self.peaks.clear();
+        let r = self.opts.nms_radius as isize;
+        for k in 0..t {
+            for j in 0..p {
+                let idx = k * p + j;
+                let v = self.acc[idx];
+                if v < floor {
+                    continue;
+                }
+                let mut is_peak = true;
+                'nb: for dk in -r..=r {
+                    for dj in -r..=r {
+                        if dk == 0 && dj == 0 {
+                            continue;
+                        }
+                        let n = self.neighbour(k, j, dk, dj);
+                        let w = self.acc[n];
+                        if w > v || (w == v && n < idx) {
+                            is_peak = false;
+                            break 'nb;
+                        }
+                    }
+                }
+                if is_peak {
+                    self.peaks.push((v, idx as u32));
+                }
+            }
+        }
+        self.peaks
+            .sort_unstable_by(|a, b| b.0.cmp(&a.0).then(a.1.cmp(&b.1)));
+        self.peaks.truncate(3 * self.opts.max_rows);
+        max
+    }
+
+    /// Refines a peak's normal on the points near its great circle. Returns the row, or
+    /// `None` when too few points support it or they do not define a great circle.
+    fn refine(&mut self, n0: Vector3<f64>, rays: &[[f32; 3]], weights: &[f32]) -> Option<Row> {
+        let cell = std::f64::consts::PI / self.opts.phi_bins.min(self.opts.theta_bins) as f64;
+        let mut tol = 1.5 * cell;
+        let min_tol = self.opts.min_tolerance_deg.to_radians();
+        // Points within twice the first band: later bands are narrower and the normal moves
+        // little, so they never need points outside this set.
+        let wide = (2.0 * tol).sin();
+        self.sel.clear();
+        let nf = [n0.x as f32, n0.y as f32, n0.z as f32];
+        for (i, r) in rays.iter().enumerate() {
+            let d = nf[0] * r[0] + nf[1] * r[1] + nf[2] * r[2];
+            if d.abs() < wide as f32 {
+                self.sel.push(i as u32);
+            }
+        }
+        let mut n = n0;
+        let mut support = 0u32;
+        let mut fit = None;
+        for _ in 0..self.opts.refine_iterations.max(1) {
+            let s_tol = tol.sin();
+            let mut sc = Scatter::new();
+            support = 0;
+            for &i in &self.sel {
+                let r = &rays[i as usize];
+                let pv = Vector3::new(r[0] as f64, r[1] as f64, r[2] as f64);
+                if n.dot(&pv).abs() < s_tol {
+                    sc.add(&pv, weights[i as usize] as f64);
+                    support += 1;
+                }
+            }
+            let f = sc.fit()?;
+            let change = axis_angle(&f.normal, &n);
+            n = f.normal;
+            fit = Some(f);
+            let rms = f.mean_sq_residual.max(0.0).sqrt().asin();
+            let next = (3.0 * rms).clamp(min_tol, tol);
+            if change < 1e-10 && (next - tol).abs() < 1e-12 {
+                break;
+            }
+            tol = next;
+        }
+        let f = fit?;
+        if support < self.opts.min_support || f.degeneracy > self.opts.max_degeneracy {
+            return None;
+        }
+        Some(Row {
+            normal: canonical(&n),
+            method: Method::Hough,
+            support,
+        })
+    }
+
+    /// Finds rows among unit rays (camera frame) with per-point weights (used by the
+    /// refinement fit; votes count points). Appends the rows to `rows`, strongest first.
+    pub fn find_rows(
+        &mut self,
+        rays: &[[f32; 3]],
+        weights: &[f32],
+        rows: &mut Vec<Row>,
+    ) -> Result<HoughResult, DetectError> {
+        if rays.len() != weights.len() {
+            return Err(DetectError::Buffer(format!(
+                "hough: {} rays but {} weights",
+                rays.len(),
+                weights.len()
+            )));
+        }
+        self.vote(rays);
+        let max_votes = self.find_peaks();
+        let p = self.opts.phi_bins;
+        self.found.clear();
+        let npeaks = self.peaks.len();
+        for pi in 0..npeaks {
+            let idx = self.peaks[pi].1 as usize;
+            let n0 = self.cell_normal(idx / p, idx % p);
+            if let Some(row) = self.refine(n0, rays, weights) {
+                self.found.push(row);
+            }
+        }
+        self.found
+            .sort_unstable_by_key(|r| std::cmp::Reverse(r.support));
+        let merge = self.opts.merge_angle_deg.to_radians();
+        let start = rows.len();
+        for row in &self.found {
+            if rows.len() - start >= self.opts.max_rows {
+                break;
+            }
+            if rows[start..]
+                .iter()
+                .all(|r| axis_angle(&r.normal, &row.normal) > merge)
+            {
+                rows.push(*row);
+            }
+        }
+        Ok(HoughResult {
+            points: rays.len(),
+            peaks: npeaks,
+            max_votes,
+            rows: rows.len() - start,
+        })
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+    use crate::sphere::any_perpendicular;
+
+    /// Deterministic generator for tests.
+    pub(crate) struct Lcg(pub u64);
+    impl Lcg {
+        pub fn next_f64(&mut self) -> f64 {
+            self.0 = self
+                .0
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (self.0 >> 11) as f64 / (1u64 << 53) as f64
+        }
+        pub fn gauss(&mut self) -> f64 {
+            let (u, v) = (self.next_f64().max(1e-300), self.next_f64());
+            (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
+        }
+    }
+
+    /// Rays on the great circle of `n` (arc `from..to` radians), spread across it by `width_rad`.
+    pub(crate) fn circle_rays(
+        n: &Vector3<f64>,
+        count: usize,
+        from: f64,
+        to: f64,
+        width_rad: f64,
+        rng: &mut Lcg,
+        out: &mut Vec<[f32; 3]>,
+    ) {
+        let u = any_perpendicular(n);
+        let v = n.cross(&u);
+        for i in 0..count {
+            let t = from + (to - from) * (i as f64 + 0.5) / count as f64;
+            let off = width_rad * (rng.next_f64() - 0.5) * 2.0;
+            let p = (u * t.cos() + v * t.sin()) * off.cos() + n * off.sin();
+            out.push([p.x as f32, p.y as f32, p.z as f32]);
+        }
+    }
+
+    #[test]
+    fn fast_atan2_is_accurate() {
+        let mut worst = 0.0f32;
+        for i in 0..3600 {
+            let a = i as f32 * 0.1f32.to_radians();
+            for &r in &[1e-3f32, 0.5, 3.0] {
+                let (y, x) = (r * a.sin(), r * a.cos());
+                worst = worst.max((fast_atan2(y, x) - y.atan2(x)).abs());
+            }
+        }
+        assert!(worst < 2e-5, "{worst}");
+        assert_eq!(fast_atan2(0.0, 0.0), 0.0);
+    }
+
+    #[test]
+    fn finds_rows_from_rays_on_known_circles() {
+        // Three rows sharing a direction (a vanishing point near the horizon), plus noise rays.
+        let vp = Vector3::new(0.2, 1.0, 0.05).normalize();
+        let a = any_perpendicular(&vp);
+        let b = vp.cross(&a);
+        let normals: Vec<Vector3<f64>> = [0.3f64, 1.2, 2.2]
+            .iter()
+            .map(|&t| canonical(&(a * t.cos() + b * t.sin())))
+            .collect();
+        let mut rng = Lcg(7);
+        let mut rays = Vec::new();
+        for n in &normals {
+            circle_rays(n, 1500, 0.2, 2.6, 0.01, &mut rng, &mut rays);
+        }
+        for _ in 0..1000 {
+            let p = Vector3::new(rng.gauss(), rng.gauss(), rng.gauss()).normalize();
+            rays.push([p.x as f32, p.y as f32, p.z as f32]);
+        }
+        let weights = vec![1.0f32; rays.len()];
+        let mut h = HoughRows::new(HoughOptions::default()).unwrap();
+        let mut rows = Vec::new();
+        let res = h.find_rows(&rays, &weights, &mut rows).unwrap();
+        assert!(res.rows >= 3, "{res:?} {rows:?}");
+        for n in &normals {
+            let best = rows
+                .iter()
+                .map(|r| axis_angle(&r.normal, n))
+                .fold(f64::INFINITY, f64::min);
+            // uniform noise across a ±0.01 rad band: the fit is far finer than a 2° cell
+            assert!(best < 1e-3, "row {n:?} best {best}");
+        }
+        let strongest: Vec<u32> = rows.iter().take(3).map(|r| r.support).collect();
+        assert!(strongest.iter().all(|&s| s >= 1400), "{strongest:?}");
+    }
+
+    #[test]
+    fn rows_near_the_poles_of_the_accumulator_are_found() {
+        // Normals within a cell of the accumulator's poles (z) and of its θ seam (θ = 0 ≡ π).
+        let cases = [
+            Vector3::new(0.01, 0.02, 1.0).normalize(),
+            Vector3::new(1.0, 0.003, 0.2).normalize(),
+            Vector3::new(1.0, -0.003, -0.02).normalize(),
+        ];
+        for n in cases {
+            let mut rng = Lcg(11);
+            let mut rays = Vec::new();
+            circle_rays(&n, 2000, 0.0, 2.0, 0.005, &mut rng, &mut rays);
+            let weights = vec![1.0f32; rays.len()];
+            let mut h = HoughRows::new(HoughOptions::default()).unwrap();
+            let mut rows = Vec::new();
+            h.find_rows(&rays, &weights, &mut rows).unwrap();
+            assert_eq!(rows.len(), 1, "{n:?}: {rows:?}");
+            assert!(axis_angle(&rows[0].normal, &n) < 1e-3, "{n:?}: {rows:?}");
+            assert!(rows[0].support >= 1900);
+        }
+    }
+
+    #[test]
+    fn every_ray_votes_in_the_cell_of_every_circle_through_it() {
+        // The rasterised curve of a ray passes through the cell of any normal perpendicular to it.
+        let mut rng = Lcg(3);
+        let mut h = HoughRows::new(HoughOptions::default()).unwrap();
+        for _ in 0..200 {
+            let p = Vector3::new(rng.gauss(), rng.gauss(), rng.gauss()).normalize();
+            h.vote(&[[p.x as f32, p.y as f32, p.z as f32]]);
+            let u = any_perpendicular(&p);
+            let v = p.cross(&u);
+            for i in 0..50 {
+                let t = i as f64 * 0.0628;
+                let n = u * t.cos() + v * t.sin();
+                let (k, j) = h.cell_of(&n);
+                // allow the neighbouring φ cell (the curve may turn inside a column)
+                let p_ = h.opts.phi_bins;
+                let hit = (-1isize..=1).any(|dj| h.acc[h.neighbour(k, j, 0, dj)] > 0)
+                    || h.acc[k * p_ + j] > 0;
+                assert!(hit, "ray {p:?} normal {n:?} cell {k},{j}");
+            }
+        }
+    }
+
+    #[test]
+    fn noise_alone_gives_few_or_no_rows_and_bad_input_errors() {
+        let mut rng = Lcg(5);
+        let rays: Vec<[f32; 3]> = (0..3000)
+            .map(|_| {
+                let p = Vector3::new(rng.gauss(), rng.gauss(), rng.gauss()).normalize();
+                [p.x as f32, p.y as f32, p.z as f32]
+            })
+            .collect();
+        let weights = vec![1.0f32; rays.len()];
+        let mut h = HoughRows::new(HoughOptions::default()).unwrap();
+        let mut rows = Vec::new();
+        h.find_rows(&rays, &weights, &mut rows).unwrap();
+        // random rays: any "row" has support near the 3° band's share, far below a real row's
+        assert!(rows.iter().all(|r| r.support < 400), "{rows:?}");
+        assert!(h.find_rows(&rays, &weights[1..], &mut rows).is_err());
+        assert!(HoughRows::new(HoughOptions {
+            phi_bins: 1,
+            ..Default::default()
+        })
+        .is_err());
+    }
+}

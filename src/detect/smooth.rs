@@ -1,0 +1,201 @@
+//! Gaussian smoothing of an 8-bit image (paper II-D: "a Gaussian smooth filter is applied to
+//! reduce noise"), separable, in fixed point, into caller-owned buffers.
+//!
+//! Owns the kernel (built once from σ) and the two passes: horizontal into a 16-bit
+//! intermediate, vertical back to 8 bits. Borders replicate the edge pixel. No allocation
+//! once the caller's buffers have their size.
+
+use super::DetectError;
+use serde::{Deserialize, Serialize};
+
+/// Options of the Gaussian filter.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SmoothOptions {
+    /// Standard deviation in working-image pixels; 0 disables smoothing (a copy).
+    pub sigma_px: f64,
+}
+
+impl Default for SmoothOptions {
+    fn default() -> Self {
+        SmoothOptions { sigma_px: 1.0 }
+    }
+}
+
+/// A separable Gaussian filter in 8.8 fixed point.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Gaussian {
+    /// Weights for offsets −radius..=radius, summing to 256.
+    kernel: Vec<u32>,
+    radius: usize,
+}
+
+impl Gaussian {
+    pub fn new(opts: &SmoothOptions) -> Result<Self, DetectError> {
+        let s = opts.sigma_px;
+        if !(s.is_finite() && (0.0..=20.0).contains(&s)) {
+            return Err(DetectError::Options(format!(
+                "smooth.sigma_px = {s} must be within 0..=20"
+            )));
+        }
+        if s < 0.05 {
+            return Ok(Gaussian {
+                kernel: vec![256],
+                radius: 0,
+            });
+        }
+        let radius = (3.0 * s).ceil() as usize;
+        let raw: Vec<f64> = (0..=2 * radius)
+            .map(|i| {
+                let x = i as f64 - radius as f64;
+                (-0.5 * x * x / (s * s)).exp()
+            })
+            .collect();
+        let sum: f64 = raw.iter().sum();
+        let mut kernel: Vec<u32> = raw
+            .iter()
+            .map(|v| (v / sum * 256.0).round() as u32)
+            .collect();
+        // Make the weights sum to exactly 256 (adjust the centre), keeping the kernel symmetric.
+        let total: i64 = kernel.iter().map(|&v| v as i64).sum();
+        let c = kernel[radius] as i64 + 256 - total;
+        kernel[radius] = c.max(0) as u32;
+        Ok(Gaussian { kernel, radius })
+    }
+
+    pub fn radius(&self) -> usize {
+        self.radius
+    }
+
+    /// Smooths `src` (width × height) into `dst` using `tmp` as the intermediate.
+    /// `tmp` is resized (allocating only when it grows); `dst` must have the size of `src`.
+    pub fn apply(
+        &self,
+        src: &[u8],
+        width: usize,
+        height: usize,
+        tmp: &mut Vec<u16>,
+        dst: &mut [u8],
+    ) -> Result<(), DetectError> {
+        let n = width * height;
+        if src.len() != n || dst.len() != n {
+            return Err(DetectError::Buffer(format!(
+                "smooth: image {width}x{height} needs {n} pixels, source has {}, destination {}",
+                src.len(),
+                dst.len()
+            )));
+        }
+        if self.radius == 0 || width == 0 || height == 0 {
+            dst.copy_from_slice(src);
+            return Ok(());
+        }
+        tmp.resize(n, 0);
+        let r = self.radius;
+        let k = &self.kernel;
+        // Horizontal: u8 -> u16 (value * 256 at most 65280).
+        let border = |srow: &[u8], x: usize| -> u16 {
+            let mut acc = 0u32;
+            for (j, &kw) in k.iter().enumerate() {
+                let xx = (x as isize + j as isize - r as isize).clamp(0, width as isize - 1);
+                acc += kw * srow[xx as usize] as u32;
+            }
+            acc as u16
+        };
+        for (srow, trow) in src.chunks_exact(width).zip(tmp.chunks_exact_mut(width)) {
+            if width <= 2 * r {
+                for (x, t) in trow.iter_mut().enumerate() {
+                    *t = border(srow, x);
+                }
+                continue;
+            }
+            for (x, t) in trow.iter_mut().enumerate().take(r) {
+                *t = border(srow, x);
+            }
+            for (x, t) in trow.iter_mut().enumerate().skip(width - r) {
+                *t = border(srow, x);
+            }
+            for (t, win) in trow[r..width - r].iter_mut().zip(srow.windows(2 * r + 1)) {
+                let mut acc = 0u32;
+                for (&kw, &v) in k.iter().zip(win) {
+                    acc += kw * v as u32;
+                }
+                *t = acc as u16;
+            }
+        }
+        // Vertical: u16 -> u8, rounding; rows accumulated whole so the loop vectorises.
+        for y in 0..height {
+            let drow = &mut dst[y * width..(y + 1) * width];
+            // Accumulate in a u32 row held in the destination's place: do it in chunks.
+            const CHUNK: usize = 256;
+            let mut acc = [0u32; CHUNK];
+            let mut x0 = 0;
+            while x0 < width {
+                let len = CHUNK.min(width - x0);
+                let acc = &mut acc[..len];
+                acc.fill(128 * 256);
+                for (j, &kw) in k.iter().enumerate() {
+                    let yy = (y as isize + j as isize - r as isize).clamp(0, height as isize - 1)
+                        as usize;
+                    let trow = &tmp[yy * width + x0..yy * width + x0 + len];
+                    for (a, &t) in acc.iter_mut().zip(trow) {
+                        *a += kw * t as u32;
+                    }
+                }
+                for (d, &a) in drow[x0..x0 + len].iter_mut().zip(acc.iter()) {
+                    *d = (a >> 16).min(255) as u8;
+                }
+                x0 += len;
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn constant_image_stays_constant() {
+        let g = Gaussian::new(&SmoothOptions { sigma_px: 1.5 }).unwrap();
+        let src = vec![77u8; 20 * 13];
+        let mut dst = vec![0u8; 20 * 13];
+        let mut tmp = Vec::new();
+        g.apply(&src, 20, 13, &mut tmp, &mut dst).unwrap();
+        assert!(dst.iter().all(|&v| v == 77), "{dst:?}");
+    }
+
+    #[test]
+    fn impulse_spreads_symmetrically_and_keeps_mass() {
+        let g = Gaussian::new(&SmoothOptions { sigma_px: 1.0 }).unwrap();
+        let (w, h) = (15, 15);
+        let mut src = vec![0u8; w * h];
+        src[7 * w + 7] = 255;
+        let mut dst = vec![0u8; w * h];
+        let mut tmp = Vec::new();
+        g.apply(&src, w, h, &mut tmp, &mut dst).unwrap();
+        let at = |r: usize, c: usize| dst[r * w + c];
+        assert!(at(7, 7) > at(7, 8) && at(7, 8) > at(7, 9));
+        assert_eq!(at(7, 6), at(7, 8));
+        assert_eq!(at(6, 7), at(8, 7));
+        assert_eq!(at(6, 7), at(7, 6));
+        let mass: u32 = dst.iter().map(|&v| v as u32).sum();
+        assert!((240..=270).contains(&mass), "{mass}");
+        // sigma 0 copies
+        let g0 = Gaussian::new(&SmoothOptions { sigma_px: 0.0 }).unwrap();
+        g0.apply(&src, w, h, &mut tmp, &mut dst).unwrap();
+        assert_eq!(dst, src);
+    }
+
+    #[test]
+    fn narrow_images_and_bad_sizes() {
+        let g = Gaussian::new(&SmoothOptions { sigma_px: 2.0 }).unwrap();
+        let src = vec![9u8; 3 * 2];
+        let mut dst = vec![0u8; 6];
+        let mut tmp = Vec::new();
+        g.apply(&src, 3, 2, &mut tmp, &mut dst).unwrap();
+        assert!(dst.iter().all(|&v| v == 9));
+        assert!(g.apply(&src, 4, 2, &mut tmp, &mut dst).is_err());
+        assert!(Gaussian::new(&SmoothOptions { sigma_px: -1.0 }).is_err());
+    }
+}

@@ -1,0 +1,193 @@
+//! Adaptive threshold that keeps about N points (paper II-D: "the threshold is tuned to allow
+//! a certain number of points to be selected", so that the Hough transform's cost is bounded
+//! whatever the image).
+//!
+//! Owns the choice of the level from a histogram of the masked pixels and the collection of
+//! the kept pixels into a caller-owned list. Pixels above the level are all kept; pixels
+//! exactly at the level are thinned evenly so that the total stays near N even when many
+//! pixels share one value (a saturated image).
+
+use super::DetectError;
+use serde::{Deserialize, Serialize};
+
+/// Options of the adaptive threshold.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ThresholdOptions {
+    /// About how many points to keep.
+    pub target_points: usize,
+    /// Pixels at or below this value are never kept (background).
+    pub min_level: u8,
+}
+
+impl Default for ThresholdOptions {
+    fn default() -> Self {
+        ThresholdOptions {
+            target_points: 12_000,
+            min_level: 10,
+        }
+    }
+}
+
+/// The threshold's outcome.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct ThresholdResult {
+    /// Pixels with a value above `level` were kept, and every `stride`-th pixel at `level`.
+    pub level: u8,
+    pub stride: u32,
+    /// Number of pixels kept.
+    pub kept: usize,
+    /// Number of valid (unmasked) pixels above `min_level`.
+    pub candidates: usize,
+}
+
+/// Chooses the level from the histogram of `image` over pixels whose `mask` byte is non-zero,
+/// then writes the indices of the kept pixels into `out` (cleared first; allocates only if its
+/// capacity is below N). Keeps between N/2 and N pixels when there are at least N candidates.
+pub fn keep_brightest(
+    image: &[u8],
+    mask: &[u8],
+    opts: &ThresholdOptions,
+    out: &mut Vec<u32>,
+) -> Result<ThresholdResult, DetectError> {
+    if image.len() != mask.len() {
+        return Err(DetectError::Buffer(format!(
+            "threshold: image has {} pixels, mask {}",
+            image.len(),
+            mask.len()
+        )));
+    }
+    if opts.target_points == 0 {
+        return Err(DetectError::Options(
+            "threshold.target_points must be at least 1".into(),
+        ));
+    }
+    if image.len() > u32::MAX as usize {
+        return Err(DetectError::Buffer("threshold: image too large".into()));
+    }
+    out.clear();
+    let mut hist = [0u32; 256];
+    // Masked pixels land in bin 0 (mask bytes are 0 or 0xFF).
+    for (&v, &m) in image.iter().zip(mask) {
+        hist[(v & m) as usize] += 1;
+    }
+    let n = opts.target_points as u64;
+    let mut above: u64 = 0; // pixels with value > level
+    let mut level = 255usize;
+    let lo = opts.min_level as usize + 1;
+    let candidates: u64 = hist[lo.min(256)..].iter().map(|&c| c as u64).sum();
+    // Descend until the pixels at >= level reach N.
+    while level >= lo {
+        let at = hist[level] as u64;
+        if above + at >= n {
+            break;
+        }
+        above += at;
+        level -= 1;
+    }
+    if level < lo {
+        // Fewer than N candidates: keep them all.
+        level = lo;
+        above = candidates - hist[lo.min(255)] as u64;
+    }
+    let at_level = if level <= 255 { hist[level] as u64 } else { 0 };
+    let want_at = n.saturating_sub(above).min(at_level);
+    let stride = if want_at == 0 {
+        u32::MAX
+    } else {
+        at_level.div_ceil(want_at).max(1) as u32
+    };
+    let level_u8 = level.min(255) as u8;
+    let mut count_at = 0u32;
+    for (i, (&v, &m)) in image.iter().zip(mask).enumerate() {
+        let v = v & m;
+        if v > level_u8 {
+            out.push(i as u32);
+        } else if v == level_u8 && level_u8 as usize >= lo {
+            if count_at % stride == 0 {
+                out.push(i as u32);
+            }
+            count_at += 1;
+        }
+    }
+    Ok(ThresholdResult {
+        level: level_u8,
+        stride,
+        kept: out.len(),
+        candidates: candidates as usize,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    #[test]
+    fn keeps_the_brightest_and_respects_mask() {
+        let image: Vec<u8> = (0..=255u8).collect();
+        let mut mask = vec![0xFFu8; 256];
+        mask[255] = 0;
+        let mut out = Vec::new();
+        let opts = ThresholdOptions {
+            target_points: 10,
+            min_level: 10,
+        };
+        let r = keep_brightest(&image, &mask, &opts, &mut out).unwrap();
+        assert_eq!(r.kept, 10);
+        assert_eq!(out, (245..255).collect::<Vec<u32>>());
+        assert_eq!(r.level, 245);
+    }
+
+    #[test]
+    fn ties_are_thinned_evenly() {
+        let image = vec![200u8; 1000];
+        let mask = vec![0xFFu8; 1000];
+        let mut out = Vec::new();
+        let opts = ThresholdOptions {
+            target_points: 100,
+            min_level: 10,
+        };
+        let r = keep_brightest(&image, &mask, &opts, &mut out).unwrap();
+        assert_eq!(r.stride, 10);
+        assert_eq!(out.len(), 100);
+        assert!(out.windows(2).all(|w| w[1] - w[0] == 10));
+    }
+
+    #[test]
+    fn background_only_keeps_nothing() {
+        let image = vec![5u8; 100];
+        let mask = vec![0xFFu8; 100];
+        let mut out = vec![1, 2, 3];
+        let r = keep_brightest(&image, &mask, &ThresholdOptions::default(), &mut out).unwrap();
+        assert_eq!(r.kept, 0);
+        assert!(out.is_empty());
+        assert!(
+            keep_brightest(&image, &mask[..5], &ThresholdOptions::default(), &mut out).is_err()
+        );
+    }
+
+    proptest! {
+        #[test]
+        fn kept_count_is_near_target(seed in 0u64..1000, n in 1usize..500) {
+            // pseudo-random image
+            let mut s = seed.wrapping_mul(6364136223846793005).wrapping_add(1);
+            let image: Vec<u8> = (0..4000).map(|_| { s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407); (s >> 56) as u8 }).collect();
+            let mask = vec![0xFFu8; image.len()];
+            let mut out = Vec::new();
+            let opts = ThresholdOptions { target_points: n, min_level: 10 };
+            let r = keep_brightest(&image, &mask, &opts, &mut out).unwrap();
+            let cand = image.iter().filter(|&&v| v > 10).count();
+            prop_assert_eq!(r.candidates, cand);
+            if cand >= n {
+                prop_assert!(out.len() >= n / 2 && out.len() <= n, "kept {} for {}", out.len(), n);
+            } else {
+                prop_assert_eq!(out.len(), cand);
+            }
+            // everything kept is at least the level, everything above the level is kept
+            for &i in &out { prop_assert!(image[i as usize] >= r.level); }
+            let above = image.iter().filter(|&&v| v > r.level).count();
+            prop_assert!(out.len() >= above);
+        }
+    }
+}

@@ -1,0 +1,431 @@
+//! The rows' common vanishing point (paper II-E): a second Hough transform over the row
+//! normals, then a fit over the consistent ones.
+//!
+//! Owns the second accumulator, over directions near the horizon (robot frame: azimuth
+//! α ∈ [0, π), the sign of a direction being free, and elevation β within ± the largest
+//! expected tilt, as the paper limits it to "the range of expected vanishing points"). Each
+//! row normal n votes, with its weight (its support, or w·support in the combined method),
+//! for every direction perpendicular to it: β(α) = atan(−(n_x cos α + n_y sin α) / n_z),
+//! rasterised like the row Hough. The winning cell is refined by the smallest eigenvector of
+//! the weighted scatter of its inlier normals (the SVD fit), iterated until the inlier set is
+//! stable; rows farther than the inlier tolerance from the plane perpendicular to the
+//! direction are rejected. Fewer than two consistent rows, or rows that all share one
+//! normal, give no vanishing point: the answer is "none", never a guess.
+
+use super::{DetectError, Row, VanishingPoint};
+use crate::camera::Mounting;
+use crate::sphere::{axis_angle, Scatter};
+use nalgebra::{Rotation3, Vector3};
+use serde::{Deserialize, Serialize};
+
+/// Options of the vanishing-point stage.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct VanishingOptions {
+    /// Accumulator cells along the azimuth (0..180°).
+    pub azimuth_bins: usize,
+    /// Accumulator cell height along the elevation (degrees).
+    pub elevation_bin_deg: f64,
+    /// A row is consistent with the vanishing point when its normal is within this angle
+    /// (degrees) of the plane perpendicular to the direction.
+    pub inlier_deg: f64,
+    /// Rows whose normals are all within this angle (degrees) of each other do not define
+    /// a direction.
+    pub min_spread_deg: f64,
+    /// Iterations of the fit / inlier update.
+    pub refine_iterations: usize,
+}
+
+impl Default for VanishingOptions {
+    fn default() -> Self {
+        VanishingOptions {
+            azimuth_bins: 180,
+            elevation_bin_deg: 1.0,
+            inlier_deg: 1.0,
+            min_spread_deg: 2.0,
+            refine_iterations: 10,
+        }
+    }
+}
+
+impl VanishingOptions {
+    pub fn validate(&self) -> Result<(), DetectError> {
+        let bad = |m: String| Err(DetectError::Options(m));
+        if !(4..=4096).contains(&self.azimuth_bins) {
+            return bad(format!(
+                "vanishing.azimuth_bins = {} must be within 4..=4096",
+                self.azimuth_bins
+            ));
+        }
+        if !(self.elevation_bin_deg > 0.01 && self.elevation_bin_deg <= 10.0) {
+            return bad(format!(
+                "vanishing.elevation_bin_deg = {} must be within (0.01, 10]",
+                self.elevation_bin_deg
+            ));
+        }
+        if !(self.inlier_deg > 0.0 && self.inlier_deg < 30.0) {
+            return bad(format!(
+                "vanishing.inlier_deg = {} must be within (0, 30)",
+                self.inlier_deg
+            ));
+        }
+        if !(self.min_spread_deg >= 0.0 && self.min_spread_deg < 90.0) {
+            return bad(format!(
+                "vanishing.min_spread_deg = {} must be within [0, 90)",
+                self.min_spread_deg
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// The outcome of the vanishing-point stage.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct VanishingResult {
+    pub vanishing_point: Option<VanishingPoint>,
+    /// Quality in 0..=1 (0 without a vanishing point): the inliers' share of the total weight,
+    /// times (1 − residual / inlier tolerance), times (1 − 2^(1 − inliers)) so that two rows
+    /// alone count half.
+    pub quality: f64,
+    /// Total weight of the inlier rows and of all rows.
+    pub inlier_weight: f64,
+    pub total_weight: f64,
+}
+
+/// The second Hough transform and its fit (buffers allocated once).
+#[derive(Debug, Clone)]
+pub struct VanishingFinder {
+    opts: VanishingOptions,
+    max_tilt: f64,
+    robot_from_camera: Rotation3<f64>,
+    cos_e: Vec<f64>,
+    sin_e: Vec<f64>,
+    elev_bins: usize,
+    acc: Vec<f64>,
+    robot_normals: Vec<Vector3<f64>>,
+}
+
+impl VanishingFinder {
+    /// `max_tilt_deg`: the vanishing point is searched within ± this angle of the robot's
+    /// horizontal plane.
+    pub fn new(
+        opts: VanishingOptions,
+        max_tilt_deg: f64,
+        mounting: &Mounting,
+    ) -> Result<Self, DetectError> {
+        opts.validate()?;
+        if !(max_tilt_deg > 0.0 && max_tilt_deg <= 80.0) {
+            return Err(DetectError::Options(format!(
+                "max_tilt_deg = {max_tilt_deg} must be within (0, 80]"
+            )));
+        }
+        let a = opts.azimuth_bins;
+        let (cos_e, sin_e) = (0..=a)
+            .map(|k| (k as f64 * std::f64::consts::PI / a as f64).sin_cos())
+            .map(|(s, c)| (c, s))
+            .unzip();
+        let elev_bins = (2.0 * max_tilt_deg / opts.elevation_bin_deg).ceil() as usize;
+        Ok(VanishingFinder {
+            opts,
+            max_tilt: max_tilt_deg.to_radians(),
+            robot_from_camera: mounting.robot_from_camera(),
+            cos_e,
+            sin_e,
+            elev_bins,
+            acc: vec![0.0; a * elev_bins],
+            robot_normals: Vec::with_capacity(64),
+        })
+    }
+
+    pub fn options(&self) -> &VanishingOptions {
+        &self.opts
+    }
+
+    /// Finds the vanishing point of `rows`, each weighted by `weights[i]` (e.g. its support).
+    /// `inliers` receives, per row, whether it is consistent with the vanishing point.
+    pub fn find(
+        &mut self,
+        rows: &[Row],
+        weights: &[f64],
+        inliers: &mut Vec<bool>,
+    ) -> Result<VanishingResult, DetectError> {
+        if rows.len() != weights.len() {
+            return Err(DetectError::Buffer(format!(
+                "vanishing point: {} rows but {} weights",
+                rows.len(),
+                weights.len()
+            )));
+        }
+        if let Some(w) = weights.iter().find(|w| !(w.is_finite() && **w >= 0.0)) {
+            return Err(DetectError::Options(format!(
+                "vanishing point: row weight {w} is not a finite non-negative number"
+            )));
+        }
+        inliers.clear();
+        inliers.resize(rows.len(), false);
+        let total_weight: f64 = weights.iter().sum();
+        let none = VanishingResult {
+            total_weight,
+            ..Default::default()
+        };
+        if rows.len() < 2 || total_weight <= 0.0 {
+            return Ok(none);
+        }
+        self.robot_normals.clear();
+        for r in rows {
+            self.robot_normals.push(self.robot_from_camera * r.normal);
+        }
+        self.vote(weights);
+        let Some(v0) = self.winner() else {
+            return Ok(none);
+        };
+        let mut v = self.robot_from_camera.inverse() * v0;
+        let s_tol = self.opts.inlier_deg.to_radians().sin();
+        let mut residual = 0.0;
+        let mut inlier_weight = 0.0;
+        let mut count = 0usize;
+        for _ in 0..self.opts.refine_iterations.max(1) {
+            let mut sc = Scatter::new();
+            let mut changed = false;
+            for (i, r) in rows.iter().enumerate() {
+                let ok = r.normal.dot(&v).abs() < s_tol && weights[i] > 0.0;
+                changed |= ok != inliers[i];
+                inliers[i] = ok;
+                if ok {
+                    sc.add(&r.normal, weights[i]);
+                }
+            }
+            count = sc.count();
+            if count < 2 {
+                break;
+            }
+            let Some(fit) = sc.fit() else { break };
+            let moved = axis_angle(&fit.normal, &v);
+            v = fit.normal;
+            residual = fit.mean_sq_residual.max(0.0).sqrt().asin();
+            inlier_weight = fit.weight;
+            if !changed && moved < 1e-12 {
+                break;
+            }
+        }
+        // Final inlier set for the final direction.
+        let mut count_final = 0;
+        for (i, r) in rows.iter().enumerate() {
+            inliers[i] = r.normal.dot(&v).abs() < s_tol && weights[i] > 0.0;
+            count_final += inliers[i] as usize;
+        }
+        if count < 2 || count_final < 2 {
+            inliers.fill(false);
+            return Ok(none);
+        }
+        // Rows that all share one normal do not fix a direction.
+        let mut spread: f64 = 0.0;
+        for i in 0..rows.len() {
+            for j in i + 1..rows.len() {
+                if inliers[i] && inliers[j] {
+                    spread = spread.max(axis_angle(&rows[i].normal, &rows[j].normal));
+                }
+            }
+        }
+        if spread < self.opts.min_spread_deg.to_radians() {
+            inliers.fill(false);
+            return Ok(none);
+        }
+        // Sign: pointing forward in the robot frame.
+        if (self.robot_from_camera * v).x < 0.0 {
+            v = -v;
+        }
+        let quality = (inlier_weight / total_weight).clamp(0.0, 1.0)
+            * (1.0 - residual / self.opts.inlier_deg.to_radians()).clamp(0.0, 1.0)
+            * (1.0 - 0.5f64.powi(count_final as i32 - 1));
+        Ok(VanishingResult {
+            vanishing_point: Some(VanishingPoint {
+                direction: v,
+                inliers: count_final,
+                residual_rad: residual,
+            }),
+            quality,
+            inlier_weight,
+            total_weight,
+        })
+    }
+
+    fn vote(&mut self, weights: &[f64]) {
+        let a = self.opts.azimuth_bins;
+        let e = self.elev_bins;
+        let tilt = self.max_tilt;
+        let scale = e as f64 / (2.0 * tilt);
+        self.acc.fill(0.0);
+        for (n, &w) in self.robot_normals.iter().zip(weights) {
+            if w <= 0.0 {
+                continue;
+            }
+            let beta = |k: usize| -> f64 {
+                let t = -(n.x * self.cos_e[k] + n.y * self.sin_e[k]);
+                if n.z == 0.0 {
+                    std::f64::consts::FRAC_PI_2.copysign(t)
+                } else {
+                    (t / n.z).atan()
+                }
+            };
+            let mut b0 = beta(0);
+            for k in 0..a {
+                let b1 = beta(k + 1);
+                let (lo, hi) = if b0 <= b1 { (b0, b1) } else { (b1, b0) };
+                b0 = b1;
+                if hi < -tilt || lo > tilt {
+                    continue;
+                }
+                let j0 = (((lo.max(-tilt) + tilt) * scale) as usize).min(e - 1);
+                let j1 = (((hi.min(tilt) + tilt) * scale) as usize).min(e - 1);
+                for v in &mut self.acc[k * e + j0..=k * e + j1] {
+                    *v += w;
+                }
+            }
+        }
+    }
+
+    /// Direction (robot frame) at the centre of the highest cell, if any cell has votes.
+    fn winner(&self) -> Option<Vector3<f64>> {
+        let (idx, &best) = self
+            .acc
+            .iter()
+            .enumerate()
+            .max_by(|a, b| a.1.total_cmp(b.1).then(b.0.cmp(&a.0)))?;
+        if best <= 0.0 {
+            return None;
+        }
+        let e = self.elev_bins;
+        let tilt = self.max_tilt;
+        let (k, j) = (idx / e, idx % e);
+        let alpha = (k as f64 + 0.5) * std::f64::consts::PI / self.opts.azimuth_bins as f64;
+        let beta = -tilt + (j as f64 + 0.5) * 2.0 * tilt / e as f64;
+        Some(Vector3::new(
+            beta.cos() * alpha.cos(),
+            beta.cos() * alpha.sin(),
+            beta.sin(),
+        ))
+    }
+}
+
+/// Row weights for the Hough method: each row's support.
+pub fn support_weights(rows: &[Row], out: &mut Vec<f64>) {
+    out.clear();
+    out.extend(rows.iter().map(|r| r.support as f64));
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::detect::Method;
+    use crate::sphere::{any_perpendicular, canonical};
+
+    fn rows_through(vp: &Vector3<f64>, angles: &[f64], support: u32) -> Vec<Row> {
+        let a = any_perpendicular(vp);
+        let b = vp.cross(&a);
+        angles
+            .iter()
+            .map(|&t| Row {
+                normal: canonical(&(a * t.cos() + b * t.sin())),
+                method: Method::Hough,
+                support,
+            })
+            .collect()
+    }
+
+    fn dir(heading: f64, tilt: f64) -> Vector3<f64> {
+        // robot frame direction → camera frame with the default mounting
+        let d = Vector3::new(
+            tilt.cos() * heading.cos(),
+            tilt.cos() * heading.sin(),
+            tilt.sin(),
+        );
+        Mounting::default().robot_from_camera().inverse() * d
+    }
+
+    #[test]
+    fn recovers_direction_and_rejects_outlier_row() {
+        let vp = dir(0.3, 0.05);
+        let mut rows = rows_through(&vp, &[0.2, 0.9, 1.6, 2.4], 500);
+        // an outlier row (a weed line) not through the vanishing point
+        rows.push(Row {
+            normal: Vector3::new(0.3, 0.5, 0.8).normalize(),
+            method: Method::Hough,
+            support: 900,
+        });
+        let mut f =
+            VanishingFinder::new(VanishingOptions::default(), 15.0, &Mounting::default()).unwrap();
+        let mut w = Vec::new();
+        support_weights(&rows, &mut w);
+        let mut inl = Vec::new();
+        let r = f.find(&rows, &w, &mut inl).unwrap();
+        let v = r.vanishing_point.unwrap();
+        assert!(axis_angle(&v.direction, &vp) < 1e-9, "{v:?}");
+        assert_eq!(v.inliers, 4);
+        assert_eq!(inl, vec![true, true, true, true, false]);
+        assert!(v.residual_rad < 1e-7, "{}", v.residual_rad);
+        assert!(r.quality > 0.5 && r.quality < 1.0, "{r:?}");
+        // sign: forward in the robot frame
+        assert!((Mounting::default().robot_from_camera() * v.direction).x > 0.0);
+    }
+
+    #[test]
+    fn two_rows_suffice_one_does_not() {
+        let vp = dir(-1.0, -0.1);
+        let rows = rows_through(&vp, &[0.4, 1.9], 100);
+        let mut f =
+            VanishingFinder::new(VanishingOptions::default(), 15.0, &Mounting::default()).unwrap();
+        let mut inl = Vec::new();
+        let r = f.find(&rows, &[100.0, 100.0], &mut inl).unwrap();
+        assert!(axis_angle(&r.vanishing_point.unwrap().direction, &vp) < 1e-9);
+        let r = f.find(&rows[..1], &[100.0], &mut inl).unwrap();
+        assert!(r.vanishing_point.is_none());
+        assert_eq!(r.quality, 0.0);
+        // two copies of one row: no direction
+        let same = vec![rows[0], rows[0]];
+        let r = f.find(&same, &[1.0, 1.0], &mut inl).unwrap();
+        assert!(r.vanishing_point.is_none());
+        // two rows whose common direction is far above the horizon: not a field's rows
+        let sky = Vector3::new(0.0, 0.0, 1.0);
+        let r = f
+            .find(
+                &rows_through(&sky, &[0.1, 1.2, 2.0], 100),
+                &[1.0; 3],
+                &mut inl,
+            )
+            .unwrap();
+        assert!(r.vanishing_point.is_none());
+        assert!(f.find(&rows, &[1.0], &mut inl).is_err());
+    }
+
+    #[test]
+    fn noisy_normals_are_averaged() {
+        let vp = dir(0.7, 0.02);
+        let a = any_perpendicular(&vp);
+        let b = vp.cross(&a);
+        let mut rng = crate::detect::hough::tests::Lcg(9);
+        let rows: Vec<Row> = (0..10)
+            .map(|i| {
+                let t = 0.1 + 0.3 * i as f64;
+                let n = a * t.cos() + b * t.sin() + vp * (2e-4 * rng.gauss());
+                Row {
+                    normal: n.normalize(),
+                    method: Method::Hough,
+                    support: 100,
+                }
+            })
+            .collect();
+        let mut f =
+            VanishingFinder::new(VanishingOptions::default(), 15.0, &Mounting::default()).unwrap();
+        let mut inl = Vec::new();
+        let r = f.find(&rows, &[1.0; 10], &mut inl).unwrap();
+        let v = r.vanishing_point.unwrap();
+        assert_eq!(v.inliers, 10);
+        assert!(
+            axis_angle(&v.direction, &vp) < 2e-4,
+            "{}",
+            axis_angle(&v.direction, &vp)
+        );
+        assert!(v.residual_rad > 0.0 && v.residual_rad < 5e-4);
+    }
+}

@@ -1,0 +1,302 @@
+//! Vegetation image: from the camera's pixels to one 8-bit channel where plants are bright.
+//!
+//! Owns the colour-to-vegetation step of the paper's section III-C ("the green parts of the
+//! image are used"): RGB input becomes the excess-green index 2G − R − B (clamped at zero and
+//! halved so that it fits a byte); Bayer RGGB input is read as 2×2 quads (R, two G, B) and
+//! gives the same index at half resolution; greyscale input is used as is (plants bright, as
+//! in the paper's synthetic images). Optional 2×2 binning brings a full-resolution frame to
+//! half resolution, so the calibration must then be rescaled by 2 (a half-resolution pixel
+//! (r, c) is centred at full-resolution (2r + 0.5, 2c + 0.5), which
+//! [`Calibration::rescaled`](crate::camera::Calibration::rescaled) does).
+
+use super::{DetectError, GreyImage};
+use crate::frame::{ImageView, PixelFormat};
+use serde::{Deserialize, Serialize};
+
+/// Which index turns colour into vegetation.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum VegetationIndex {
+    /// Excess green, unless the colour image carries no colour (R = G = B, e.g. a greyscale
+    /// picture saved as RGB): then brightness.
+    #[default]
+    Auto,
+    /// Excess green 2G − R − B, clamped at 0, halved: 0..=255.
+    ExcessGreen,
+    /// Brightness (R + 2G + B) / 4: for colour images whose plants are simply bright.
+    Luma,
+}
+
+/// Options of the vegetation step.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct VegetationOptions {
+    pub index: VegetationIndex,
+}
+
+/// What the vegetation step produced.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct VegetationResult {
+    /// Size reduction from the input image (1 or 2).
+    pub factor: u32,
+    pub width: usize,
+    pub height: usize,
+}
+
+/// The working-image size for an input size, format and binning choice: Bayer input is
+/// always read by quads (factor 2). Errors when a factor-2 image cannot be formed.
+pub fn working_factor(
+    width: u32,
+    height: u32,
+    format: PixelFormat,
+    bin2: bool,
+) -> Result<u32, DetectError> {
+    let factor = if format == PixelFormat::BayerRggb8 || bin2 {
+        2
+    } else {
+        1
+    };
+    if factor == 2 && (width % 2 != 0 || height % 2 != 0) {
+        return Err(DetectError::Image {
+            height,
+            width,
+            problem: format!(
+                "{} needs an even width and height (2x2 quads)",
+                if format == PixelFormat::BayerRggb8 {
+                    "Bayer input"
+                } else {
+                    "2x2 binning"
+                }
+            ),
+        });
+    }
+    Ok(factor)
+}
+
+#[inline]
+fn exg(r: i32, g2: i32, b: i32) -> u8 {
+    // g2 is 2G; result (2G - R - B) / 2 clamped to 0..=255.
+    ((g2 - r - b).max(0) >> 1).min(255) as u8
+}
+
+#[inline]
+fn luma(r: i32, g2: i32, b: i32) -> u8 {
+    ((r + g2 + b + 2) >> 2).min(255) as u8
+}
+
+/// Whether RGB bytes carry colour: the mean of |R − G| + |G − B| over about 4096 pixels
+/// spread through the image is at least 1.
+fn has_colour(rgb: &[u8]) -> bool {
+    let n = rgb.len() / 3;
+    let step = (n / 4096).max(1);
+    let (mut sum, mut count) = (0u64, 0u64);
+    for p in rgb.chunks_exact(3).step_by(step) {
+        sum += (p[0] as i32 - p[1] as i32).unsigned_abs() as u64
+            + (p[1] as i32 - p[2] as i32).unsigned_abs() as u64;
+        count += 1;
+    }
+    count > 0 && sum >= count
+}
+
+/// Computes the vegetation image of `view` into `out` (resized as needed, which allocates only
+/// when it grows). `bin2` asks for 2×2 binning of Mono8/Rgb8 input; Bayer input is always
+/// read by quads.
+pub fn vegetation_image(
+    view: &ImageView,
+    opts: &VegetationOptions,
+    bin2: bool,
+    out: &mut GreyImage,
+) -> Result<VegetationResult, DetectError> {
+    let (w, h) = (view.width as usize, view.height as usize);
+    let expected = w * h * view.format.bytes_per_pixel();
+    if view.data.len() != expected {
+        return Err(DetectError::Image {
+            height: view.height,
+            width: view.width,
+            problem: format!(
+                "{:?} needs {expected} bytes, has {}",
+                view.format,
+                view.data.len()
+            ),
+        });
+    }
+    let factor = working_factor(view.width, view.height, view.format, bin2)? as usize;
+    let (ow, oh) = (w / factor, h / factor);
+    out.resize(ow, oh);
+    let d = view.data;
+    let index = match opts.index {
+        VegetationIndex::Auto if view.format == PixelFormat::Rgb8 && !has_colour(d) => {
+            VegetationIndex::Luma
+        }
+        VegetationIndex::Auto => VegetationIndex::ExcessGreen,
+        other => other,
+    };
+    let f = |r: i32, g2: i32, b: i32| match index {
+        VegetationIndex::Luma => luma(r, g2, b),
+        _ => exg(r, g2, b),
+    };
+    match (view.format, factor) {
+        (PixelFormat::Mono8, 1) => out.data.copy_from_slice(d),
+        (PixelFormat::Mono8, _) => {
+            for r in 0..oh {
+                let a = &d[2 * r * w..2 * r * w + w];
+                let b = &d[(2 * r + 1) * w..(2 * r + 1) * w + w];
+                let o = &mut out.data[r * ow..(r + 1) * ow];
+                for (c, v) in o.iter_mut().enumerate() {
+                    let s = a[2 * c] as u32
+                        + a[2 * c + 1] as u32
+                        + b[2 * c] as u32
+                        + b[2 * c + 1] as u32;
+                    *v = ((s + 2) >> 2) as u8;
+                }
+            }
+        }
+        (PixelFormat::Rgb8, 1) => {
+            for (o, p) in out.data.iter_mut().zip(d.chunks_exact(3)) {
+                *o = f(p[0] as i32, 2 * p[1] as i32, p[2] as i32);
+            }
+        }
+        (PixelFormat::Rgb8, _) => {
+            for r in 0..oh {
+                let a = &d[2 * r * w * 3..(2 * r + 1) * w * 3];
+                let b = &d[(2 * r + 1) * w * 3..(2 * r + 2) * w * 3];
+                let o = &mut out.data[r * ow..(r + 1) * ow];
+                for (c, v) in o.iter_mut().enumerate() {
+                    let i = 6 * c;
+                    let sum = |k: usize| -> i32 {
+                        a[i + k] as i32
+                            + a[i + 3 + k] as i32
+                            + b[i + k] as i32
+                            + b[i + 3 + k] as i32
+                    };
+                    // Means of the four pixels: R = sum/4 etc.; 2G - R - B = (2 sG - sR - sB) / 4.
+                    let (sr, sg, sb) = (sum(0), sum(1), sum(2));
+                    *v = f((sr + 2) >> 2, (2 * sg + 2) >> 2, (sb + 2) >> 2);
+                }
+            }
+        }
+        (PixelFormat::BayerRggb8, _) => {
+            for r in 0..oh {
+                let a = &d[2 * r * w..2 * r * w + w];
+                let b = &d[(2 * r + 1) * w..(2 * r + 1) * w + w];
+                let o = &mut out.data[r * ow..(r + 1) * ow];
+                for (c, v) in o.iter_mut().enumerate() {
+                    let red = a[2 * c] as i32;
+                    let g2 = a[2 * c + 1] as i32 + b[2 * c] as i32;
+                    let blue = b[2 * c + 1] as i32;
+                    *v = f(red, g2, blue);
+                }
+            }
+        }
+    }
+    Ok(VegetationResult {
+        factor: factor as u32,
+        width: ow,
+        height: oh,
+    })
+}
+
+/// Brightness of input pixel (row, col) whatever the format (Bayer: mean of its quad).
+/// Used to find the lens's image circle. Coordinates must be inside the image.
+#[inline]
+pub fn brightness_at(view: &ImageView, row: usize, col: usize) -> u8 {
+    let w = view.width as usize;
+    let d = view.data;
+    match view.format {
+        PixelFormat::Mono8 => d[row * w + col],
+        PixelFormat::Rgb8 => {
+            let i = 3 * (row * w + col);
+            luma(d[i] as i32, 2 * d[i + 1] as i32, d[i + 2] as i32)
+        }
+        PixelFormat::BayerRggb8 => {
+            let (r0, c0) = (row & !1, col & !1);
+            let (r1, c1) = ((r0 + 1).min(view.height as usize - 1), (c0 + 1).min(w - 1));
+            let s = d[r0 * w + c0] as u32
+                + d[r0 * w + c1] as u32
+                + d[r1 * w + c0] as u32
+                + d[r1 * w + c1] as u32;
+            ((s + 2) >> 2) as u8
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rgb_excess_green() {
+        // green plant, brown soil, blue sky, white
+        let data = [40, 200, 30, 120, 80, 50, 60, 90, 220, 255, 255, 255];
+        let view = ImageView::new(4, 1, PixelFormat::Rgb8, &data).unwrap();
+        let mut out = GreyImage::default();
+        let r = vegetation_image(&view, &VegetationOptions::default(), false, &mut out).unwrap();
+        assert_eq!((r.factor, r.width, r.height), (1, 4, 1));
+        assert_eq!(out.data, vec![165, 0, 0, 0]);
+    }
+
+    #[test]
+    fn grey_pictures_in_rgb_use_brightness() {
+        let data = [90u8, 90, 90, 200, 200, 200];
+        let view = ImageView::new(2, 1, PixelFormat::Rgb8, &data).unwrap();
+        let mut out = GreyImage::default();
+        vegetation_image(&view, &VegetationOptions::default(), false, &mut out).unwrap();
+        assert_eq!(out.data, vec![90, 200]);
+        let opts = VegetationOptions {
+            index: VegetationIndex::ExcessGreen,
+        };
+        vegetation_image(&view, &opts, false, &mut out).unwrap();
+        assert_eq!(out.data, vec![0, 0]);
+    }
+
+    #[test]
+    fn bayer_quads_give_half_resolution_exg() {
+        // 4x2 Bayer: quad 0 green plant (R 40, G 200/190, B 30), quad 1 soil.
+        #[rustfmt::skip]
+        let data = [
+            40, 200, 120, 80,
+            190, 30, 80, 50,
+        ];
+        let view = ImageView::new(4, 2, PixelFormat::BayerRggb8, &data).unwrap();
+        let mut out = GreyImage::default();
+        let r = vegetation_image(&view, &VegetationOptions::default(), false, &mut out).unwrap();
+        assert_eq!((r.factor, r.width, r.height), (2, 2, 1));
+        assert_eq!(out.data, vec![160, 0]);
+        let odd = [0u8; 6];
+        let view = ImageView::new(3, 2, PixelFormat::BayerRggb8, &odd).unwrap();
+        let e = vegetation_image(&view, &VegetationOptions::default(), false, &mut out)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("even"), "{e}");
+    }
+
+    #[test]
+    fn mono_binning_and_rgb_binning_agree_with_means() {
+        let data = [10u8, 20, 30, 40, 50, 60, 70, 80];
+        let view = ImageView::new(4, 2, PixelFormat::Mono8, &data).unwrap();
+        let mut out = GreyImage::default();
+        vegetation_image(&view, &VegetationOptions::default(), true, &mut out).unwrap();
+        assert_eq!(
+            out.data,
+            vec![(10 + 20 + 50 + 60) / 4, (30 + 40 + 70 + 80) / 4]
+        );
+        vegetation_image(&view, &VegetationOptions::default(), false, &mut out).unwrap();
+        assert_eq!(out.data, data.to_vec());
+        // RGB 2x2 of one plant colour bins to that colour's index.
+        let px = [40u8, 200, 30];
+        let rgb: Vec<u8> = px.iter().copied().cycle().take(12).collect();
+        let view = ImageView::new(2, 2, PixelFormat::Rgb8, &rgb).unwrap();
+        vegetation_image(&view, &VegetationOptions::default(), true, &mut out).unwrap();
+        assert_eq!(out.data, vec![165]);
+    }
+
+    #[test]
+    fn brightness_of_each_format() {
+        let rgb = [10u8, 20, 30];
+        let v = ImageView::new(1, 1, PixelFormat::Rgb8, &rgb).unwrap();
+        assert_eq!(brightness_at(&v, 0, 0), 20);
+        let bay = [10u8, 20, 30, 40];
+        let v = ImageView::new(2, 2, PixelFormat::BayerRggb8, &bay).unwrap();
+        assert_eq!(brightness_at(&v, 1, 1), 25);
+    }
+}

@@ -1,0 +1,259 @@
+//! The per-frame estimate: what the node publishes for every frame.
+//!
+//! Owns [`Estimate`], the versioned JSON document that goes out over UDP, stdout and into
+//! recordings (schema in the README), its [`Status`], and the conversion from a detector
+//! [`Detection`](crate::detect::Detection) plus the frame's timestamps. Vectors are unit vectors
+//! in the calibration's OCamCalib camera frame; angles are radians; times are nanoseconds since
+//! the UNIX epoch.
+
+use crate::detect::{Detection, Method};
+use crate::frame::Frame;
+use serde::{Deserialize, Serialize};
+
+/// The version of the [`Estimate`] JSON schema. Bumped on any incompatible change.
+pub const SCHEMA_VERSION: u32 = 1;
+
+/// What kind of answer an estimate carries.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Status {
+    /// A vanishing point with quality at or above the configured minimum.
+    Ok,
+    /// A vanishing point, but with quality below the configured minimum.
+    Degraded,
+    /// Fewer than two rows found: no vanishing point.
+    NoRows,
+    /// Two or more rows, but no vanishing point consistent with them.
+    NoVanishingPoint,
+    /// The source delivers no frames (camera gone); the estimate carries no measurement.
+    CameraLost,
+    /// The detector failed on this frame (the `error` field says why).
+    Error,
+}
+
+impl Status {
+    pub fn name(self) -> &'static str {
+        match self {
+            Status::Ok => "ok",
+            Status::Degraded => "degraded",
+            Status::NoRows => "no_rows",
+            Status::NoVanishingPoint => "no_vanishing_point",
+            Status::CameraLost => "camera_lost",
+            Status::Error => "error",
+        }
+    }
+}
+
+/// One detected row in an estimate.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RowEstimate {
+    /// Unit normal of the row's plane (sign free).
+    pub normal: [f64; 3],
+    pub method: Method,
+    pub support: u32,
+}
+
+/// Ground truth carried by synthetic frames, so the output can be checked live.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TruthEstimate {
+    pub heading_rad: f64,
+    pub tilt_rad: f64,
+    /// Direction along the rows (sign free).
+    pub vanishing_point: [f64; 3],
+    pub lateral_offset_m: f64,
+}
+
+/// The per-frame estimate, as published (one JSON object).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Estimate {
+    /// [`SCHEMA_VERSION`].
+    pub schema_version: u32,
+    /// The frame's sequence number (from the source; gaps mean frames dropped or lost).
+    pub seq: u64,
+    /// Capture time of the frame (camera or recording clock), ns since the UNIX epoch.
+    pub capture_ns: u64,
+    /// Host time the frame was received, ns since the UNIX epoch.
+    pub receive_ns: u64,
+    /// Host time the estimate was published, ns since the UNIX epoch.
+    pub publish_ns: u64,
+    /// End-to-end latency on the host: publish time minus receive time, milliseconds.
+    pub latency_ms: f64,
+    /// The detector's own time for this frame, milliseconds.
+    pub detector_ms: f64,
+    pub status: Status,
+    /// Heading of the rows, counter-clockwise from the robot's forward axis (REP 103).
+    pub heading_rad: Option<f64>,
+    /// Elevation of the row direction in the robot frame.
+    pub tilt_rad: Option<f64>,
+    /// Unit direction along the rows, OCamCalib camera frame (sign free).
+    pub vanishing_point: Option<[f64; 3]>,
+    pub rows: Vec<RowEstimate>,
+    /// 0..=1; 0 without a vanishing point.
+    pub quality: f64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub error: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub truth: Option<TruthEstimate>,
+}
+
+impl Estimate {
+    /// Builds the estimate of `frame` from the detector's answer. `publish_ns` is filled in
+    /// by [`Estimate::stamp_published`].
+    pub fn from_detection(
+        frame: &Frame,
+        det: &Detection,
+        detector_ms: f64,
+        min_quality: f64,
+    ) -> Estimate {
+        let status = match (&det.vanishing_point, det.rows.len()) {
+            (Some(_), _) if det.quality >= min_quality => Status::Ok,
+            (Some(_), _) => Status::Degraded,
+            (None, n) if n < 2 => Status::NoRows,
+            (None, _) => Status::NoVanishingPoint,
+        };
+        let mut e = Estimate::empty(frame, status);
+        e.detector_ms = detector_ms;
+        e.heading_rad = det.heading_rad;
+        e.tilt_rad = det.tilt_rad;
+        e.vanishing_point = det.vanishing_point.map(|v| v.direction.into());
+        e.rows = det
+            .rows
+            .iter()
+            .map(|r| RowEstimate {
+                normal: r.normal.into(),
+                method: r.method,
+                support: r.support,
+            })
+            .collect();
+        e.quality = det.quality;
+        e
+    }
+
+    /// An estimate for `frame` with no measurement (used for errors).
+    pub fn empty(frame: &Frame, status: Status) -> Estimate {
+        Estimate {
+            schema_version: SCHEMA_VERSION,
+            seq: frame.seq,
+            capture_ns: frame.capture_ns,
+            receive_ns: frame.receive_ns,
+            publish_ns: 0,
+            latency_ms: 0.0,
+            detector_ms: 0.0,
+            status,
+            heading_rad: None,
+            tilt_rad: None,
+            vanishing_point: None,
+            rows: Vec::new(),
+            quality: 0.0,
+            error: None,
+            truth: frame.truth.as_ref().map(|t| TruthEstimate {
+                heading_rad: t.heading_rad,
+                tilt_rad: t.tilt_rad,
+                vanishing_point: t.vp_along,
+                lateral_offset_m: t.lateral_offset_m,
+            }),
+        }
+    }
+
+    /// An estimate saying the source delivers nothing (no frame): `seq` is the last frame's.
+    pub fn camera_lost(last_seq: u64, now_ns: u64) -> Estimate {
+        Estimate {
+            schema_version: SCHEMA_VERSION,
+            seq: last_seq,
+            capture_ns: 0,
+            receive_ns: now_ns,
+            publish_ns: now_ns,
+            latency_ms: 0.0,
+            detector_ms: 0.0,
+            status: Status::CameraLost,
+            heading_rad: None,
+            tilt_rad: None,
+            vanishing_point: None,
+            rows: Vec::new(),
+            quality: 0.0,
+            error: None,
+            truth: None,
+        }
+    }
+
+    /// Sets the publish time and the end-to-end latency.
+    pub fn stamp_published(&mut self, now_ns: u64) {
+        self.publish_ns = now_ns;
+        self.latency_ms = now_ns.saturating_sub(self.receive_ns) as f64 / 1e6;
+    }
+
+    /// The estimate as one line of JSON (no trailing newline).
+    pub fn to_json(&self) -> String {
+        // Serialising plain data with finite or null floats cannot fail; non-finite floats
+        // become null in serde_json.
+        serde_json::to_string(self).unwrap_or_else(|e| format!("{{\"error\":\"{e}\"}}"))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::detect::{Row, VanishingPoint};
+    use crate::frame::PixelFormat;
+    use nalgebra::Vector3;
+
+    fn frame() -> Frame {
+        Frame {
+            seq: 7,
+            capture_ns: 1_000,
+            receive_ns: 2_000_000,
+            width: 2,
+            height: 1,
+            format: PixelFormat::Mono8,
+            data: vec![0, 0],
+            truth: None,
+        }
+    }
+
+    #[test]
+    fn status_follows_detection() {
+        let f = frame();
+        let mut d = Detection::default();
+        assert_eq!(
+            Estimate::from_detection(&f, &d, 1.0, 0.5).status,
+            Status::NoRows
+        );
+        let row = Row {
+            normal: Vector3::x(),
+            method: Method::Hough,
+            support: 10,
+        };
+        d.rows = vec![row, row];
+        assert_eq!(
+            Estimate::from_detection(&f, &d, 1.0, 0.5).status,
+            Status::NoVanishingPoint
+        );
+        d.vanishing_point = Some(VanishingPoint {
+            direction: Vector3::y(),
+            inliers: 2,
+            residual_rad: 0.0,
+        });
+        d.quality = 0.4;
+        assert_eq!(
+            Estimate::from_detection(&f, &d, 1.0, 0.5).status,
+            Status::Degraded
+        );
+        d.quality = 0.9;
+        let e = Estimate::from_detection(&f, &d, 1.0, 0.5);
+        assert_eq!(e.status, Status::Ok);
+        assert_eq!(e.vanishing_point, Some([0.0, 1.0, 0.0]));
+    }
+
+    #[test]
+    fn json_round_trip_and_latency() {
+        let mut e = Estimate::empty(&frame(), Status::NoRows);
+        e.stamp_published(5_000_000);
+        assert!((e.latency_ms - 3.0).abs() < 1e-9);
+        let text = e.to_json();
+        assert!(text.contains("\"status\":\"no_rows\""));
+        assert!(text.contains("\"schema_version\":1"));
+        assert!(!text.contains("truth"));
+        let back: Estimate = serde_json::from_str(&text).unwrap();
+        assert_eq!(back, e);
+    }
+}

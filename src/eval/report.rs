@@ -1,0 +1,207 @@
+//! Writes an evaluation's results: Markdown tables beside the paper's figures, PNG plots of
+//! the detection rate against plant distance, and the raw outcomes as JSON lines.
+
+use super::plot::{Chart, Series};
+use super::run::EvalResults;
+use crate::detect::Method;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+/// The paper's Table I: mean (mrad), max (mrad), variance (1e-8 rad²).
+pub const PAPER_TABLE1: [(Method, f64, f64, f64); 3] = [
+    (Method::Edge, 0.12, 1.8, 7.9),
+    (Method::Hough, 0.036, 0.17, 0.13),
+    (Method::Combined, 0.029, 0.35, 0.23),
+];
+
+/// The paper's Table II failures: fisheye, omni.
+pub const PAPER_TABLE2: [(Method, usize, usize); 3] = [
+    (Method::Edge, 30, 27),
+    (Method::Hough, 18, 48),
+    (Method::Combined, 15, 23),
+];
+
+/// An error writing the report.
+#[derive(Debug, thiserror::Error)]
+#[error("{path}: {source}")]
+pub struct ReportError {
+    pub path: PathBuf,
+    #[source]
+    pub source: std::io::Error,
+}
+
+fn colour(m: Method) -> [u8; 3] {
+    match m {
+        Method::Edge => [30, 80, 220],
+        Method::Hough => [220, 40, 40],
+        Method::Combined => [20, 150, 60],
+    }
+}
+
+/// The Markdown report (all tables).
+pub fn markdown(r: &EvalResults, command: &str) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "# omnirow evaluation\n\nProduced by `{command}`.\n");
+    let _ = writeln!(
+        s,
+        "## Table I: accuracy of the vanishing point\n\nAngle between the found and the true vanishing point, over the images where it was found within {}°. Paper's figures in brackets.\n",
+        r.pass_deg
+    );
+    let _ = writeln!(
+        s,
+        "| method | found | mean error (1e-3 rad) | max error (1e-3 rad) | variance (1e-8 rad²) |\n|---|---|---|---|---|"
+    );
+    for &m in &r.methods {
+        let a = r.accuracy(m);
+        let paper = PAPER_TABLE1.iter().find(|p| p.0 == m);
+        let p = |i: usize| {
+            paper
+                .map(|p| format!(" ({})", [p.1, p.2, p.3][i]))
+                .unwrap_or_default()
+        };
+        let _ = writeln!(
+            s,
+            "| {} | {}/{} | {:.4}{} | {:.3}{} | {:.3}{} |",
+            m.name(),
+            a.found,
+            a.images,
+            a.errors.mean * 1e3,
+            p(0),
+            a.errors.max * 1e3,
+            p(1),
+            a.errors.variance * 1e8,
+            p(2)
+        );
+    }
+    let _ = writeln!(
+        s,
+        "\n## Figures 8 and 9: detection rate against plant distance\n\nCorrect rows / rows found. A row is correct when its great circle passes within 1° of the true vanishing point and its normal lies within 3° of a visible row's.\n"
+    );
+    for (l, name) in r.lens_names.iter().enumerate() {
+        let _ = write!(s, "**{name}**\n\n| plant distance (m) |");
+        for &m in &r.methods {
+            let _ = write!(s, " {} |", m.name());
+        }
+        let _ = write!(s, "\n|---|");
+        for _ in &r.methods {
+            let _ = write!(s, "---|");
+        }
+        let _ = writeln!(s);
+        let rates: Vec<Vec<(f64, f64)>> =
+            r.methods.iter().map(|&m| r.detection_rate(l, m)).collect();
+        for (i, &d) in r.plant_distances.iter().enumerate() {
+            let _ = write!(s, "| {d} |");
+            for rate in &rates {
+                let _ = write!(s, " {:.2} |", rate[i].1);
+            }
+            let _ = writeln!(s);
+        }
+        let _ = writeln!(
+            s,
+            "\n![detection rate, {name}](detection_rate_{name}.png)\n"
+        );
+    }
+    let _ = writeln!(
+        s,
+        "## Table II: failures (vanishing point more than {}° from the truth, or none)\n\nRandom noise levels, plant distances, position errors and weeds. Paper's figures in brackets (fisheye, omni; its image count is not stated).\n",
+        r.pass_deg
+    );
+    let _ = write!(s, "| method |");
+    for name in &r.lens_names {
+        let _ = write!(s, " {name} |");
+    }
+    let _ = writeln!(s, " sum |");
+    let _ = write!(s, "|---|");
+    for _ in &r.lens_names {
+        let _ = write!(s, "---|");
+    }
+    let _ = writeln!(s, "---|");
+    for &m in &r.methods {
+        let _ = write!(s, "| {} |", m.name());
+        let mut sum = (0, 0);
+        for l in 0..r.lens_names.len() {
+            let c = r.failures(l, m);
+            sum.0 += c.failures;
+            sum.1 += c.images;
+            let _ = write!(s, " {}/{} |", c.failures, c.images);
+        }
+        let paper = PAPER_TABLE2
+            .iter()
+            .find(|p| p.0 == m)
+            .map(|p| format!(" ({}, {})", p.1, p.2))
+            .unwrap_or_default();
+        let _ = writeln!(s, " {}/{}{} |", sum.0, sum.1, paper);
+    }
+    let _ = writeln!(
+        s,
+        "\n## Speed\n\nDetector time per image (not counting rendering), over every image of the run.\n\n| method | median (ms) | p99 (ms) |\n|---|---|---|"
+    );
+    for &m in &r.methods {
+        let (p50, p99) = r.speed(m);
+        let _ = writeln!(s, "| {} | {p50:.1} | {p99:.1} |", m.name());
+    }
+    s
+}
+
+/// The detection-rate chart for one lens.
+pub fn detection_chart(r: &EvalResults, lens: usize) -> Chart {
+    Chart {
+        title: format!("Detection rate, {}", r.lens_names[lens]),
+        x_label: "plant distance (m)".into(),
+        y_label: "correct / found".into(),
+        x_range: None,
+        y_range: Some((0.0, 1.0)),
+        series: r
+            .methods
+            .iter()
+            .map(|&m| Series {
+                label: m.name().into(),
+                colour: colour(m),
+                points: r.detection_rate(lens, m),
+            })
+            .collect(),
+    }
+}
+
+/// Writes `README.md`, one PNG per lens and `outcomes.jsonl` into `dir`.
+pub fn write(r: &EvalResults, dir: &Path, command: &str) -> Result<Vec<PathBuf>, ReportError> {
+    let io = |path: &Path| {
+        let path = path.to_path_buf();
+        move |source| ReportError { path, source }
+    };
+    std::fs::create_dir_all(dir).map_err(io(dir))?;
+    let mut written = Vec::new();
+    let md = dir.join("README.md");
+    std::fs::write(&md, markdown(r, command)).map_err(io(&md))?;
+    written.push(md);
+    for (l, name) in r.lens_names.iter().enumerate() {
+        let png = dir.join(format!("detection_rate_{name}.png"));
+        detection_chart(r, l)
+            .render()
+            .save(&png)
+            .map_err(|e| ReportError {
+                path: png.clone(),
+                source: std::io::Error::other(e),
+            })?;
+        written.push(png);
+    }
+    let jl = dir.join("outcomes.jsonl");
+    let mut lines = String::new();
+    for o in &r.outcomes {
+        let v = serde_json::json!({
+            "experiment": format!("{:?}", o.experiment).to_lowercase(),
+            "lens": r.lens_names[o.lens],
+            "method": o.method.name(),
+            "plant_distance_m": o.plant_distance_m,
+            "vp_error_rad": o.vp_error_rad,
+            "rows_found": o.rows_found,
+            "rows_correct": o.rows_correct,
+            "detect_ms": o.detect_ms,
+        });
+        lines.push_str(&v.to_string());
+        lines.push('\n');
+    }
+    std::fs::write(&jl, lines).map_err(io(&jl))?;
+    written.push(jl);
+    Ok(written)
+}

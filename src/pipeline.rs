@@ -1,0 +1,871 @@
+//! The node's pipeline: source thread → bounded channel → detector workers → publisher thread,
+//! with a recorder thread on the side.
+//!
+//! Owns the threads, the bounded channels and the real-time policy. The source never blocks
+//! on a slow detector: when the frame channel is full the OLDEST queued frame is dropped and
+//! counted, so the newest frame always wins. Several detector workers take frames in turn;
+//! each frame gets a ticket when it is taken, and the publisher releases estimates strictly
+//! in ticket order, so the output is in frame order whatever the workers' timing. The recorder
+//! has its own bounded channel with the same drop-oldest policy, so a slow disk never stalls
+//! detection.
+//!
+//! Memory bound: at most `frame_queue + workers + workers (reorder buffer) + 1 (latest, for
+//! the overlay) + record_queue + 2 (being recorded, being read by the source)` frames are
+//! alive at once, whatever the input rate — for the GC2450C (5 MB a frame) with the defaults
+//! (2, 2, 4) that is 13 frames, 65 MB.
+
+use crate::detect::Detection;
+use crate::estimate::{Estimate, Status};
+use crate::frame::{now_ns, Frame, ImageView};
+use crate::publish::Publisher;
+use crate::record::{RecordState, Recorder};
+use crate::source::{Poll, Source, SourceState};
+use crossbeam_channel::{bounded, Receiver, RecvTimeoutError, Sender, TrySendError};
+use serde::Serialize;
+use std::collections::{BTreeMap, VecDeque};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+/// The processing step the pipeline runs on each frame (the detector, or a test double).
+pub trait Processor: Send {
+    /// Detects rows, the vanishing point, heading and tilt in `view`, into `out`.
+    fn process(
+        &mut self,
+        view: &ImageView,
+        out: &mut Detection,
+    ) -> Result<(), Box<dyn std::error::Error + Send + Sync>>;
+}
+
+/// Pipeline settings.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PipelineOptions {
+    /// Capacity of the frame channel between the source and the detector workers.
+    pub frame_queue: usize,
+    /// Capacity of the channel from the workers to the publisher.
+    pub estimate_queue: usize,
+    /// Capacity of the recorder's channel.
+    pub record_queue: usize,
+    /// Estimates below this quality are published as `degraded`.
+    pub min_quality: f64,
+    /// Stop after this many frames from the source.
+    pub max_frames: Option<u64>,
+    /// Stop after this long.
+    pub max_duration: Option<Duration>,
+    /// How often the status summary is logged and handed to the publishers.
+    pub status_interval: Duration,
+    /// How long the source waits for a frame before it checks for stop (and reports its state).
+    pub poll_timeout: Duration,
+}
+
+impl Default for PipelineOptions {
+    fn default() -> Self {
+        PipelineOptions {
+            frame_queue: 2,
+            estimate_queue: 8,
+            record_queue: 4,
+            min_quality: 0.3,
+            max_frames: None,
+            max_duration: None,
+            status_interval: Duration::from_secs(1),
+            poll_timeout: Duration::from_millis(50),
+        }
+    }
+}
+
+/// Errors starting the pipeline.
+#[derive(Debug, thiserror::Error)]
+pub enum PipelineError {
+    #[error("the pipeline needs at least one detector worker")]
+    NoWorkers,
+    #[error("channel capacities must be at least 1 (frame_queue {0}, estimate_queue {1}, record_queue {2})")]
+    Capacity(usize, usize, usize),
+    #[error("starting thread {0}: {1}")]
+    Thread(&'static str, std::io::Error),
+}
+
+/// The status summary: once a second in the log, to the publishers, on /metrics.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct StatusSummary {
+    pub uptime_s: f64,
+    pub frames_in: u64,
+    pub frames_out: u64,
+    /// Frames dropped by the drop-oldest policy (detector too slow).
+    pub dropped: u64,
+    /// Frames or estimates the recorder dropped (disk too slow).
+    pub record_dropped: u64,
+    pub detector_errors: u64,
+    /// Frames per second in and out over the last status interval.
+    pub fps_in: f64,
+    pub fps_out: f64,
+    /// Detector time per frame over the last 1024 frames, milliseconds.
+    pub detector_p50_ms: f64,
+    pub detector_p99_ms: f64,
+    /// End-to-end latency (receive → publish) over the last 1024 frames, milliseconds.
+    pub latency_p50_ms: f64,
+    pub latency_p99_ms: f64,
+    pub source_state: SourceState,
+    pub recording: String,
+    pub recorded_frames: u64,
+    /// Estimates published per status since the start.
+    pub status_counts: BTreeMap<String, u64>,
+}
+
+/// The latest published frame with its detection (for /overlay.png).
+#[derive(Debug, Clone)]
+pub struct Latest {
+    pub frame: Arc<Frame>,
+    pub detection: Detection,
+    pub estimate: Estimate,
+}
+
+/// State shared by the pipeline threads and read by the monitors (HTTP, systemd).
+pub struct Shared {
+    started: Instant,
+    stop: AtomicBool,
+    frames_in: AtomicU64,
+    frames_out: AtomicU64,
+    dropped: AtomicU64,
+    record_dropped: AtomicU64,
+    detector_errors: AtomicU64,
+    recorded_frames: AtomicU64,
+    source_state: Mutex<SourceState>,
+    recording: Mutex<String>,
+    samples: Mutex<Samples>,
+    latest: Mutex<Option<Latest>>,
+    /// Last loop time of each thread, ns since `started` (0 = finished).
+    heartbeats: Mutex<Vec<(&'static str, u64)>>,
+    rates: Mutex<Rates>,
+}
+
+#[derive(Default)]
+struct Samples {
+    detector_ms: VecDeque<f64>,
+    latency_ms: VecDeque<f64>,
+    status_counts: BTreeMap<String, u64>,
+}
+
+struct Rates {
+    at: Instant,
+    frames_in: u64,
+    frames_out: u64,
+    fps_in: f64,
+    fps_out: f64,
+}
+
+const SAMPLE_WINDOW: usize = 1024;
+/// A thread that has not looped for this long counts as stuck.
+const STUCK_AFTER: Duration = Duration::from_secs(3);
+
+fn percentile(v: &VecDeque<f64>, p: f64) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    let mut s: Vec<f64> = v.iter().copied().collect();
+    s.sort_by(f64::total_cmp);
+    let i = ((p * (s.len() - 1) as f64).round() as usize).min(s.len() - 1);
+    s[i]
+}
+
+impl Shared {
+    fn new() -> Self {
+        let now = Instant::now();
+        Shared {
+            started: now,
+            stop: AtomicBool::new(false),
+            frames_in: AtomicU64::new(0),
+            frames_out: AtomicU64::new(0),
+            dropped: AtomicU64::new(0),
+            record_dropped: AtomicU64::new(0),
+            detector_errors: AtomicU64::new(0),
+            recorded_frames: AtomicU64::new(0),
+            source_state: Mutex::new(SourceState::Starting),
+            recording: Mutex::new("off".into()),
+            samples: Mutex::new(Samples::default()),
+            latest: Mutex::new(None),
+            heartbeats: Mutex::new(Vec::new()),
+            rates: Mutex::new(Rates {
+                at: now,
+                frames_in: 0,
+                frames_out: 0,
+                fps_in: 0.0,
+                fps_out: 0.0,
+            }),
+        }
+    }
+
+    fn register(&self, name: &'static str) -> usize {
+        let mut h = lock(&self.heartbeats);
+        h.push((name, self.elapsed_ns().max(1)));
+        h.len() - 1
+    }
+
+    fn beat(&self, id: usize) {
+        let t = self.elapsed_ns().max(1);
+        lock(&self.heartbeats)[id].1 = t;
+    }
+
+    fn retire(&self, id: usize) {
+        lock(&self.heartbeats)[id].1 = 0;
+    }
+
+    fn elapsed_ns(&self) -> u64 {
+        self.started.elapsed().as_nanos() as u64
+    }
+
+    /// Asks the source to stop; the pipeline then drains and finishes.
+    pub fn request_stop(&self) {
+        self.stop.store(true, Ordering::SeqCst);
+    }
+
+    pub fn stop_requested(&self) -> bool {
+        self.stop.load(Ordering::SeqCst)
+    }
+
+    /// True while every pipeline thread that is still running loops (none is stuck).
+    pub fn alive(&self) -> bool {
+        let now = self.elapsed_ns();
+        let h = lock(&self.heartbeats);
+        !h.is_empty()
+            && h.iter().any(|&(_, t)| t != 0)
+            && h.iter()
+                .all(|&(_, t)| t == 0 || now.saturating_sub(t) < STUCK_AFTER.as_nanos() as u64)
+    }
+
+    /// The names of the threads that are stuck (for the log).
+    pub fn stuck_threads(&self) -> Vec<&'static str> {
+        let now = self.elapsed_ns();
+        lock(&self.heartbeats)
+            .iter()
+            .filter(|&&(_, t)| t != 0 && now.saturating_sub(t) >= STUCK_AFTER.as_nanos() as u64)
+            .map(|&(n, _)| n)
+            .collect()
+    }
+
+    pub fn frames_in(&self) -> u64 {
+        self.frames_in.load(Ordering::Relaxed)
+    }
+
+    pub fn source_state(&self) -> SourceState {
+        *lock(&self.source_state)
+    }
+
+    pub fn latest(&self) -> Option<Latest> {
+        lock(&self.latest).clone()
+    }
+
+    /// The status summary now (frame rates over the last status interval).
+    pub fn status(&self) -> StatusSummary {
+        let (fps_in, fps_out) = {
+            let r = lock(&self.rates);
+            (r.fps_in, r.fps_out)
+        };
+        let s = lock(&self.samples);
+        StatusSummary {
+            uptime_s: self.started.elapsed().as_secs_f64(),
+            frames_in: self.frames_in.load(Ordering::Relaxed),
+            frames_out: self.frames_out.load(Ordering::Relaxed),
+            dropped: self.dropped.load(Ordering::Relaxed),
+            record_dropped: self.record_dropped.load(Ordering::Relaxed),
+            detector_errors: self.detector_errors.load(Ordering::Relaxed),
+            fps_in,
+            fps_out,
+            detector_p50_ms: percentile(&s.detector_ms, 0.5),
+            detector_p99_ms: percentile(&s.detector_ms, 0.99),
+            latency_p50_ms: percentile(&s.latency_ms, 0.5),
+            latency_p99_ms: percentile(&s.latency_ms, 0.99),
+            source_state: self.source_state(),
+            recording: lock(&self.recording).clone(),
+            recorded_frames: self.recorded_frames.load(Ordering::Relaxed),
+            status_counts: s.status_counts.clone(),
+        }
+    }
+
+    fn update_rates(&self) {
+        let mut r = lock(&self.rates);
+        let dt = r.at.elapsed().as_secs_f64();
+        if dt <= 0.0 {
+            return;
+        }
+        let fin = self.frames_in.load(Ordering::Relaxed);
+        let fout = self.frames_out.load(Ordering::Relaxed);
+        r.fps_in = (fin - r.frames_in) as f64 / dt;
+        r.fps_out = (fout - r.frames_out) as f64 / dt;
+        r.frames_in = fin;
+        r.frames_out = fout;
+        r.at = Instant::now();
+    }
+}
+
+/// Locks a mutex, recovering the data if a thread panicked while holding it.
+fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// Sends `item`, dropping the oldest queued items while the channel is full. Returns how
+/// many were dropped.
+pub fn send_drop_oldest<T>(tx: &Sender<T>, rx: &Receiver<T>, mut item: T) -> u64 {
+    let mut dropped = 0;
+    loop {
+        match tx.try_send(item) {
+            Ok(()) => return dropped,
+            Err(TrySendError::Full(back)) => {
+                item = back;
+                if rx.try_recv().is_ok() {
+                    dropped += 1;
+                }
+            }
+            Err(TrySendError::Disconnected(_)) => return dropped,
+        }
+    }
+}
+
+enum RecordItem {
+    Frame(Arc<Frame>),
+    Estimate(Box<Estimate>),
+}
+
+struct Done {
+    ticket: u64,
+    frame: Arc<Frame>,
+    detection: Detection,
+    estimate: Estimate,
+}
+
+/// A running pipeline.
+pub struct Pipeline {
+    shared: Arc<Shared>,
+    threads: Vec<(&'static str, JoinHandle<()>)>,
+}
+
+impl Pipeline {
+    /// Starts the threads. `processors` are the detector workers (one thread each).
+    pub fn start(
+        mut source: Box<dyn Source>,
+        processors: Vec<Box<dyn Processor>>,
+        mut publishers: Vec<Box<dyn Publisher>>,
+        recorder: Option<Recorder>,
+        opts: PipelineOptions,
+    ) -> Result<Pipeline, PipelineError> {
+        if processors.is_empty() {
+            return Err(PipelineError::NoWorkers);
+        }
+        if opts.frame_queue == 0 || opts.estimate_queue == 0 || opts.record_queue == 0 {
+            return Err(PipelineError::Capacity(
+                opts.frame_queue,
+                opts.estimate_queue,
+                opts.record_queue,
+            ));
+        }
+        let shared = Arc::new(Shared::new());
+        let mut threads = Vec::new();
+        let (frame_tx, frame_rx) = bounded::<Arc<Frame>>(opts.frame_queue);
+        let (done_tx, done_rx) = bounded::<Done>(opts.estimate_queue);
+        let (rec_tx, rec_rx) = bounded::<RecordItem>(opts.record_queue);
+        let recording = recorder.is_some();
+        let spawn = |name: &'static str, f: Box<dyn FnOnce() + Send>| {
+            std::thread::Builder::new()
+                .name(name.into())
+                .spawn(f)
+                .map_err(|e| PipelineError::Thread(name, e))
+        };
+
+        // Recorder.
+        if let Some(mut rec) = recorder {
+            let sh = shared.clone();
+            let rx = rec_rx.clone();
+            let id = sh.register("recorder");
+            *lock(&sh.recording) = record_state_text(rec.state());
+            threads.push((
+                "recorder",
+                spawn(
+                    "recorder",
+                    Box::new(move || {
+                        loop {
+                            sh.beat(id);
+                            let item = match rx.recv_timeout(Duration::from_millis(200)) {
+                                Ok(i) => i,
+                                Err(RecvTimeoutError::Timeout) => continue,
+                                Err(RecvTimeoutError::Disconnected) => break,
+                            };
+                            let r = match &item {
+                                RecordItem::Frame(f) => rec.write_frame(f),
+                                RecordItem::Estimate(e) => rec.write_estimate(e),
+                            };
+                            if let Err(e) = r {
+                                tracing::error!("recording stopped: {e}; detection goes on");
+                                rec.fail(e.to_string());
+                            }
+                            sh.recorded_frames
+                                .store(rec.frames_written(), Ordering::Relaxed);
+                            *lock(&sh.recording) = record_state_text(rec.state());
+                        }
+                        if let Err(e) = rec.finish() {
+                            tracing::error!("closing the recording: {e}");
+                        }
+                        *lock(&sh.recording) = record_state_text(rec.state());
+                        sh.retire(id);
+                    }),
+                )?,
+            ));
+        }
+
+        // Source.
+        {
+            let sh = shared.clone();
+            let (tx, rx) = (frame_tx, frame_rx.clone());
+            let (rtx, rrx) = (rec_tx.clone(), rec_rx.clone());
+            let opts = opts.clone();
+            let id = sh.register("source");
+            tracing::info!("source: {}", source.describe());
+            threads.push((
+                "source",
+                spawn(
+                    "source",
+                    Box::new(move || {
+                        let t0 = Instant::now();
+                        let mut n = 0u64;
+                        loop {
+                            sh.beat(id);
+                            if sh.stop_requested()
+                                || opts.max_frames.is_some_and(|m| n >= m)
+                                || opts.max_duration.is_some_and(|d| t0.elapsed() >= d)
+                            {
+                                break;
+                            }
+                            let polled = source.poll(opts.poll_timeout);
+                            *lock(&sh.source_state) = source.state();
+                            match polled {
+                                Ok(Poll::Frame(mut f)) => {
+                                    f.receive_ns = now_ns();
+                                    n += 1;
+                                    sh.frames_in.fetch_add(1, Ordering::Relaxed);
+                                    let f = Arc::new(f);
+                                    if recording {
+                                        let d = send_drop_oldest(
+                                            &rtx,
+                                            &rrx,
+                                            RecordItem::Frame(f.clone()),
+                                        );
+                                        sh.record_dropped.fetch_add(d, Ordering::Relaxed);
+                                    }
+                                    let d = send_drop_oldest(&tx, &rx, f);
+                                    if d > 0 {
+                                        sh.dropped.fetch_add(d, Ordering::Relaxed);
+                                        tracing::debug!(
+                                            dropped = d,
+                                            "frame queue full: oldest dropped"
+                                        );
+                                    }
+                                }
+                                Ok(Poll::Idle) => {}
+                                Ok(Poll::End) => {
+                                    tracing::info!(frames = n, "source ended");
+                                    break;
+                                }
+                                Err(e) => {
+                                    tracing::error!("source failed: {e}");
+                                    break;
+                                }
+                            }
+                        }
+                        let mut st = lock(&sh.source_state);
+                        if *st != SourceState::Lost {
+                            *st = SourceState::Ended;
+                        }
+                        drop(st);
+                        sh.retire(id);
+                    }),
+                )?,
+            ));
+        }
+        // Detector workers: take a frame and its ticket under one lock, so tickets follow the
+        // order frames leave the queue.
+        let intake = Arc::new(Mutex::new((frame_rx, 0u64)));
+        let n_workers = processors.len();
+        for (i, mut proc) in processors.into_iter().enumerate() {
+            let name: &'static str = WORKER_NAMES.get(i).copied().unwrap_or("detector");
+            let sh = shared.clone();
+            let intake = intake.clone();
+            let tx = done_tx.clone();
+            let min_quality = opts.min_quality;
+            let id = sh.register(name);
+            threads.push((
+                name,
+                spawn(
+                    name,
+                    Box::new(move || {
+                        let mut det = Detection::default();
+                        loop {
+                            sh.beat(id);
+                            let got = {
+                                let mut g = lock(&intake);
+                                match g.0.recv_timeout(Duration::from_millis(100)) {
+                                    Ok(f) => {
+                                        let t = g.1;
+                                        g.1 += 1;
+                                        Ok((t, f))
+                                    }
+                                    Err(e) => Err(e),
+                                }
+                            };
+                            let (ticket, frame) = match got {
+                                Ok(x) => x,
+                                Err(RecvTimeoutError::Timeout) => continue,
+                                Err(RecvTimeoutError::Disconnected) => break,
+                            };
+                            sh.beat(id);
+                            let t = Instant::now();
+                            let result = match frame.view() {
+                                Ok(view) => proc.process(&view, &mut det),
+                                Err(e) => Err(e.into()),
+                            };
+                            let ms = t.elapsed().as_secs_f64() * 1e3;
+                            let estimate = match result {
+                                Ok(()) => Estimate::from_detection(&frame, &det, ms, min_quality),
+                                Err(e) => {
+                                    sh.detector_errors.fetch_add(1, Ordering::Relaxed);
+                                    tracing::warn!(seq = frame.seq, "detector: {e}");
+                                    det = Detection::default();
+                                    let mut est = Estimate::empty(&frame, Status::Error);
+                                    est.detector_ms = ms;
+                                    est.error = Some(e.to_string());
+                                    est
+                                }
+                            };
+                            let done = Done {
+                                ticket,
+                                frame,
+                                detection: det.clone(),
+                                estimate,
+                            };
+                            if tx.send(done).is_err() {
+                                break;
+                            }
+                        }
+                        sh.retire(id);
+                    }),
+                )?,
+            ));
+        }
+        drop(done_tx);
+
+        // Publisher: in-order release, publishing, status, camera-lost heartbeats.
+        {
+            let sh = shared.clone();
+            let rtx = rec_tx;
+            let rrx = rec_rx;
+            let id = sh.register("publisher");
+            let status_interval = opts.status_interval;
+            let max_waiting = opts.estimate_queue + 2 * n_workers + 2;
+            threads.push((
+                "publisher",
+                spawn(
+                    "publisher",
+                    Box::new(move || {
+                        let mut next_ticket = 0u64;
+                        let mut waiting: BTreeMap<u64, Done> = BTreeMap::new();
+                        let mut last_status = Instant::now();
+                        let mut last_lost: Option<Instant> = None;
+                        let mut last_seq = 0u64;
+                        let mut disconnected = false;
+                        while !disconnected || !waiting.is_empty() {
+                            sh.beat(id);
+                            match done_rx.recv_timeout(Duration::from_millis(100)) {
+                                Ok(d) => {
+                                    waiting.insert(d.ticket, d);
+                                }
+                                Err(RecvTimeoutError::Timeout) => {}
+                                Err(RecvTimeoutError::Disconnected) => disconnected = true,
+                            }
+                            // A ticket that can never come back (a worker died mid-frame, or
+                            // all workers are gone): release what is waiting, in order.
+                            if disconnected || waiting.len() > max_waiting {
+                                if let Some(&t) = waiting.keys().next() {
+                                    next_ticket = next_ticket.max(t);
+                                }
+                            }
+                            while let Some(d) = waiting.remove(&next_ticket) {
+                                next_ticket += 1;
+                                let Done {
+                                    frame,
+                                    detection,
+                                    mut estimate,
+                                    ..
+                                } = d;
+                                estimate.stamp_published(now_ns());
+                                last_seq = estimate.seq;
+                                for p in publishers.iter_mut() {
+                                    if let Err(e) = p.publish(&estimate, Some(&frame)) {
+                                        tracing::debug!(publisher = p.name(), "publish: {e}");
+                                    }
+                                }
+                                sh.frames_out.fetch_add(1, Ordering::Relaxed);
+                                {
+                                    let mut s = lock(&sh.samples);
+                                    if s.detector_ms.len() == SAMPLE_WINDOW {
+                                        s.detector_ms.pop_front();
+                                        s.latency_ms.pop_front();
+                                    }
+                                    s.detector_ms.push_back(estimate.detector_ms);
+                                    s.latency_ms.push_back(estimate.latency_ms);
+                                    *s.status_counts
+                                        .entry(estimate.status.name().to_string())
+                                        .or_default() += 1;
+                                }
+                                if recording {
+                                    let d = send_drop_oldest(
+                                        &rtx,
+                                        &rrx,
+                                        RecordItem::Estimate(Box::new(estimate.clone())),
+                                    );
+                                    sh.record_dropped.fetch_add(d, Ordering::Relaxed);
+                                }
+                                *lock(&sh.latest) = Some(Latest {
+                                    frame,
+                                    detection,
+                                    estimate,
+                                });
+                            }
+                            if sh.source_state() == SourceState::Lost
+                                && last_lost.map_or(true, |t| t.elapsed() >= Duration::from_secs(1))
+                            {
+                                last_lost = Some(Instant::now());
+                                let e = Estimate::camera_lost(last_seq, now_ns());
+                                for p in publishers.iter_mut() {
+                                    let _ = p.publish(&e, None);
+                                }
+                                *lock(&sh.samples)
+                                    .status_counts
+                                    .entry(e.status.name().to_string())
+                                    .or_default() += 1;
+                            }
+                            if last_status.elapsed() >= status_interval {
+                                last_status = Instant::now();
+                                sh.update_rates();
+                                let st = sh.status();
+                                tracing::info!(
+                                    frames_in = st.frames_in,
+                                    frames_out = st.frames_out,
+                                    dropped = st.dropped,
+                                    fps = format_args!("{:.1}", st.fps_out),
+                                    detector_p50_ms = format_args!("{:.1}", st.detector_p50_ms),
+                                    detector_p99_ms = format_args!("{:.1}", st.detector_p99_ms),
+                                    latency_p99_ms = format_args!("{:.1}", st.latency_p99_ms),
+                                    source = st.source_state.name(),
+                                    recording = %st.recording,
+                                    "status"
+                                );
+                                for p in publishers.iter_mut() {
+                                    p.status(&st);
+                                }
+                            }
+                        }
+                        for p in publishers.iter_mut() {
+                            p.finish();
+                        }
+                        sh.retire(id);
+                    }),
+                )?,
+            ));
+        }
+        Ok(Pipeline { shared, threads })
+    }
+
+    /// The shared state, for monitors (HTTP, systemd notify).
+    pub fn shared(&self) -> Arc<Shared> {
+        self.shared.clone()
+    }
+
+    /// Asks the source to stop; the pipeline drains what is queued, closes the recording
+    /// and finishes.
+    pub fn request_stop(&self) {
+        self.shared.request_stop();
+    }
+
+    /// True when every thread has finished.
+    pub fn is_finished(&self) -> bool {
+        self.threads.iter().all(|(_, t)| t.is_finished())
+    }
+
+    /// Waits for every thread and returns the final status. A thread that panicked is
+    /// reported by name.
+    pub fn join(self) -> Result<StatusSummary, String> {
+        let mut panicked = Vec::new();
+        for (name, t) in self.threads {
+            if t.join().is_err() {
+                panicked.push(name);
+            }
+        }
+        self.shared.update_rates();
+        if panicked.is_empty() {
+            Ok(self.shared.status())
+        } else {
+            Err(format!(
+                "pipeline threads panicked: {}",
+                panicked.join(", ")
+            ))
+        }
+    }
+}
+
+const WORKER_NAMES: [&str; 8] = [
+    "detector-0",
+    "detector-1",
+    "detector-2",
+    "detector-3",
+    "detector-4",
+    "detector-5",
+    "detector-6",
+    "detector-7",
+];
+
+fn record_state_text(s: &RecordState) -> String {
+    match s {
+        RecordState::Recording(p) => format!("recording {}", p.display()),
+        RecordState::StoppedDiskFull => "stopped: disk reserve reached".into(),
+        RecordState::Failed(e) => format!("failed: {e}"),
+        RecordState::Closed => "closed".into(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::detect::{Method, Row};
+    use crate::frame::PixelFormat;
+    use crate::publish::PublishError;
+    use crate::source::SourceError;
+    use nalgebra::Vector3;
+
+    /// Delivers `n` tiny frames as fast as asked.
+    struct Burst {
+        n: u64,
+        next: u64,
+    }
+
+    impl Source for Burst {
+        fn describe(&self) -> String {
+            "burst".into()
+        }
+        fn poll(&mut self, _t: Duration) -> Result<Poll, SourceError> {
+            if self.next == self.n {
+                return Ok(Poll::End);
+            }
+            self.next += 1;
+            Ok(Poll::Frame(Frame {
+                seq: self.next - 1,
+                capture_ns: self.next * 1000,
+                receive_ns: 0,
+                width: 4,
+                height: 2,
+                format: PixelFormat::Mono8,
+                data: vec![self.next as u8; 8],
+                truth: None,
+            }))
+        }
+        fn state(&self) -> SourceState {
+            SourceState::Streaming
+        }
+    }
+
+    /// Reports the frame's first byte as a row's support, after a delay that depends on it.
+    struct Slow {
+        delay: fn(u8) -> Duration,
+    }
+
+    impl Processor for Slow {
+        fn process(
+            &mut self,
+            view: &ImageView,
+            out: &mut Detection,
+        ) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
+            std::thread::sleep((self.delay)(view.data[0]));
+            out.rows.clear();
+            out.rows.push(Row {
+                normal: Vector3::z(),
+                method: Method::Hough,
+                support: view.data[0] as u32,
+            });
+            Ok(())
+        }
+    }
+
+    struct Collect(Arc<Mutex<Vec<Estimate>>>);
+
+    impl Publisher for Collect {
+        fn name(&self) -> &str {
+            "collect"
+        }
+        fn publish(&mut self, e: &Estimate, _f: Option<&Arc<Frame>>) -> Result<(), PublishError> {
+            self.0.lock().unwrap().push(e.clone());
+            Ok(())
+        }
+    }
+
+    fn run(
+        n: u64,
+        workers: usize,
+        delay: fn(u8) -> Duration,
+        queue: usize,
+    ) -> (StatusSummary, Vec<Estimate>) {
+        let got = Arc::new(Mutex::new(Vec::new()));
+        let procs: Vec<Box<dyn Processor>> = (0..workers)
+            .map(|_| Box::new(Slow { delay }) as Box<dyn Processor>)
+            .collect();
+        let p = Pipeline::start(
+            Box::new(Burst { n, next: 0 }),
+            procs,
+            vec![Box::new(Collect(got.clone()))],
+            None,
+            PipelineOptions {
+                frame_queue: queue,
+                ..PipelineOptions::default()
+            },
+        )
+        .unwrap();
+        let st = p.join().unwrap();
+        let v = got.lock().unwrap().clone();
+        (st, v)
+    }
+
+    #[test]
+    fn slow_detector_drops_oldest_and_counts() {
+        let (st, out) = run(200, 1, |_| Duration::from_millis(2), 2);
+        assert_eq!(st.frames_in, 200);
+        assert!(st.dropped > 0, "a burst into a slow detector must drop");
+        assert_eq!(st.frames_out + st.dropped, st.frames_in);
+        assert_eq!(out.len() as u64, st.frames_out);
+        // Newest wins: the last frame of the burst is always processed.
+        assert_eq!(out.last().unwrap().seq, 199);
+        assert!(out.windows(2).all(|w| w[0].seq < w[1].seq));
+    }
+
+    #[test]
+    fn two_workers_publish_in_frame_order() {
+        // Odd frames are slow, even ones fast: workers finish out of order.
+        let (st, out) = run(
+            40,
+            2,
+            |b| Duration::from_millis(if b % 2 == 1 { 6 } else { 0 }),
+            64,
+        );
+        assert_eq!(st.dropped, 0);
+        assert_eq!(out.len(), 40);
+        for (i, e) in out.iter().enumerate() {
+            assert_eq!(e.seq, i as u64);
+            assert_eq!(e.rows[0].support, (i + 1) as u32);
+            assert!(e.latency_ms >= 0.0);
+        }
+    }
+
+    #[test]
+    fn send_drop_oldest_keeps_newest() {
+        let (tx, rx) = bounded(2);
+        assert_eq!(send_drop_oldest(&tx, &rx, 1), 0);
+        assert_eq!(send_drop_oldest(&tx, &rx, 2), 0);
+        assert_eq!(send_drop_oldest(&tx, &rx, 3), 1);
+        assert_eq!(rx.try_iter().collect::<Vec<_>>(), vec![2, 3]);
+    }
+}

@@ -1,0 +1,489 @@
+//! Recording: frames and estimates into MCAP files that ROS 2 tools and Foxglove open.
+//!
+//! Owns the [`Recorder`]: frames go on `/omnirow/image_raw` as `sensor_msgs/msg/Image` in CDR
+//! (schema: the ROS 2 message definition, encoding `ros2msg`), estimates on
+//! `/omnirow/estimate` as JSON, and synthetic ground truth on `/omnirow/ground_truth` as JSON.
+//! Every frame closes its chunk and hands it to the OS; the file is synced to disk at least
+//! every `sync_interval`, so a power cut loses at most that much. Files rotate by size or
+//! duration, and recording stops (detection goes on) when free space would fall below the
+//! reserve. [`image_msg`] holds the CDR and Foxglove image codecs.
+
+pub mod image_msg;
+
+use crate::estimate::Estimate;
+use crate::frame::Frame;
+use std::collections::BTreeMap;
+use std::fs::File;
+use std::io::BufWriter;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+/// Topic of the image channel.
+pub const IMAGE_TOPIC: &str = "/omnirow/image_raw";
+/// Topic of the estimate channel.
+pub const ESTIMATE_TOPIC: &str = "/omnirow/estimate";
+/// Topic of the ground-truth channel (synthetic frames only).
+pub const TRUTH_TOPIC: &str = "/omnirow/ground_truth";
+
+/// A JSON schema (draft 2020-12, as Foxglove reads it) for the estimate channel.
+pub const ESTIMATE_JSON_SCHEMA: &str = r#"{"title":"omnirow.Estimate","type":"object","properties":{"schema_version":{"type":"integer"},"seq":{"type":"integer"},"capture_ns":{"type":"integer"},"receive_ns":{"type":"integer"},"publish_ns":{"type":"integer"},"latency_ms":{"type":"number"},"detector_ms":{"type":"number"},"status":{"type":"string","enum":["ok","degraded","no_rows","no_vanishing_point","camera_lost","error"]},"heading_rad":{"type":["number","null"]},"tilt_rad":{"type":["number","null"]},"vanishing_point":{"type":["array","null"],"items":{"type":"number"}},"rows":{"type":"array","items":{"type":"object","properties":{"normal":{"type":"array","items":{"type":"number"}},"method":{"type":"string"},"support":{"type":"integer"}}}},"quality":{"type":"number"},"error":{"type":"string"},"truth":{"type":"object"}}}"#;
+
+/// Errors of the recorder.
+#[derive(Debug, thiserror::Error)]
+pub enum RecordError {
+    #[error("recording directory {path}: {source}")]
+    Dir {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("recording {path}: {source}")]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("recording {path}: MCAP: {source}")]
+    Mcap {
+        path: PathBuf,
+        source: mcap::McapError,
+    },
+}
+
+/// What to record and how.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RecordOptions {
+    /// Directory the files go into (created if missing).
+    pub dir: PathBuf,
+    /// File name prefix; files are `<prefix>_<UTC time>_<index>.mcap`.
+    pub prefix: String,
+    /// Start a new file when the current one reaches this size (0: never).
+    pub rotate_bytes: u64,
+    /// Start a new file after this long (zero: never).
+    pub rotate_after: Duration,
+    /// Stop recording when the free space of the file system would fall below this.
+    pub reserve_bytes: u64,
+    /// Sync the file to disk at least this often.
+    pub sync_interval: Duration,
+    /// Record the frames (false: estimates only).
+    pub frames: bool,
+    /// `frame_id` written into the image headers.
+    pub frame_id: String,
+}
+
+impl Default for RecordOptions {
+    fn default() -> Self {
+        RecordOptions {
+            dir: PathBuf::from("/var/lib/omnirow"),
+            prefix: "omnirow".into(),
+            rotate_bytes: 4 << 30,
+            rotate_after: Duration::from_secs(600),
+            reserve_bytes: 1 << 30,
+            sync_interval: Duration::from_secs(1),
+            frames: true,
+            frame_id: "omnirow_camera".into(),
+        }
+    }
+}
+
+/// The recorder's state, for the status summary and /metrics.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum RecordState {
+    Recording(PathBuf),
+    /// Stopped because the disk reserve was reached (detection goes on).
+    StoppedDiskFull,
+    /// Stopped after an I/O error (detection goes on).
+    Failed(String),
+    Closed,
+}
+
+struct OpenFile {
+    path: PathBuf,
+    writer: mcap::Writer<BufWriter<File>>,
+    opened: Instant,
+    bytes: u64,
+    image_ch: u16,
+    estimate_ch: u16,
+    truth_ch: u16,
+    image_seq: u32,
+    estimate_seq: u32,
+}
+
+/// Writes frames and estimates into rotating MCAP files.
+pub struct Recorder {
+    opts: RecordOptions,
+    file: Option<OpenFile>,
+    state: RecordState,
+    files: Vec<PathBuf>,
+    next_index: u32,
+    scratch: Vec<u8>,
+    last_sync: Instant,
+    last_space_check: Instant,
+    since_space_check: u64,
+    frames_written: u64,
+    bytes_written: u64,
+}
+
+impl Recorder {
+    /// Creates the directory if needed and opens the first file.
+    pub fn new(opts: RecordOptions) -> Result<Self, RecordError> {
+        std::fs::create_dir_all(&opts.dir).map_err(|source| RecordError::Dir {
+            path: opts.dir.clone(),
+            source,
+        })?;
+        let mut r = Recorder {
+            opts,
+            file: None,
+            state: RecordState::Closed,
+            files: Vec::new(),
+            next_index: 0,
+            scratch: Vec::new(),
+            last_sync: Instant::now(),
+            last_space_check: Instant::now(),
+            since_space_check: 0,
+            frames_written: 0,
+            bytes_written: 0,
+        };
+        if r.space_ok(0)? {
+            r.open()?;
+        } else {
+            tracing::warn!(dir = %r.opts.dir.display(), reserve_mb = r.opts.reserve_bytes >> 20,
+                "not recording: free space is below the reserve");
+            r.state = RecordState::StoppedDiskFull;
+        }
+        Ok(r)
+    }
+
+    pub fn state(&self) -> &RecordState {
+        &self.state
+    }
+
+    /// Every file written so far (including the open one).
+    pub fn files(&self) -> &[PathBuf] {
+        &self.files
+    }
+
+    pub fn frames_written(&self) -> u64 {
+        self.frames_written
+    }
+
+    pub fn bytes_written(&self) -> u64 {
+        self.bytes_written
+    }
+
+    fn open(&mut self) -> Result<(), RecordError> {
+        let stamp = utc_stamp(crate::frame::now_ns());
+        let path = self.opts.dir.join(format!(
+            "{}_{}_{:03}.mcap",
+            self.opts.prefix, stamp, self.next_index
+        ));
+        self.next_index += 1;
+        let io = |source| RecordError::Io {
+            path: path.clone(),
+            source,
+        };
+        let mc = |source| RecordError::Mcap {
+            path: path.clone(),
+            source,
+        };
+        let f = File::create(&path).map_err(io)?;
+        let opts = mcap::WriteOptions::new()
+            .compression(None)
+            .profile("ros2")
+            .library(concat!("omnirow-", env!("CARGO_PKG_VERSION")))
+            .chunk_size(Some(1 << 20));
+        let mut writer = opts
+            .create(BufWriter::with_capacity(1 << 20, f))
+            .map_err(mc)?;
+        let none = BTreeMap::new();
+        let img_schema = writer
+            .add_schema(
+                "sensor_msgs/msg/Image",
+                "ros2msg",
+                image_msg::ROS2_IMAGE_SCHEMA.as_bytes(),
+            )
+            .map_err(mc)?;
+        let mut meta = BTreeMap::new();
+        meta.insert("offered_qos_profiles".to_string(), String::new());
+        let image_ch = writer
+            .add_channel(img_schema, IMAGE_TOPIC, "cdr", &meta)
+            .map_err(mc)?;
+        let est_schema = writer
+            .add_schema(
+                "omnirow.Estimate",
+                "jsonschema",
+                ESTIMATE_JSON_SCHEMA.as_bytes(),
+            )
+            .map_err(mc)?;
+        let estimate_ch = writer
+            .add_channel(est_schema, ESTIMATE_TOPIC, "json", &none)
+            .map_err(mc)?;
+        let truth_schema = writer
+            .add_schema(
+                "omnirow.GroundTruth",
+                "jsonschema",
+                br#"{"title":"omnirow.GroundTruth","type":"object"}"#,
+            )
+            .map_err(mc)?;
+        let truth_ch = writer
+            .add_channel(truth_schema, TRUTH_TOPIC, "json", &none)
+            .map_err(mc)?;
+        tracing::info!(file = %path.display(), "recording");
+        self.files.push(path.clone());
+        self.state = RecordState::Recording(path.clone());
+        self.file = Some(OpenFile {
+            path,
+            writer,
+            opened: Instant::now(),
+            bytes: 0,
+            image_ch,
+            estimate_ch,
+            truth_ch,
+            image_seq: 0,
+            estimate_seq: 0,
+        });
+        Ok(())
+    }
+
+    /// Free space on the recording file system is at least `reserve + extra` bytes.
+    fn space_ok(&mut self, extra: u64) -> Result<bool, RecordError> {
+        self.last_space_check = Instant::now();
+        self.since_space_check = 0;
+        let free = free_bytes(&self.opts.dir).map_err(|source| RecordError::Dir {
+            path: self.opts.dir.clone(),
+            source,
+        })?;
+        Ok(free >= self.opts.reserve_bytes.saturating_add(extra))
+    }
+
+    /// Records a frame (and its ground truth, if any). A recording that has stopped ignores it.
+    pub fn write_frame(&mut self, frame: &Frame) -> Result<(), RecordError> {
+        if !self.opts.frames {
+            return Ok(());
+        }
+        let need = frame.data.len() as u64 + 1024;
+        self.before_write(need)?;
+        let Some(f) = self.file.as_mut() else {
+            return Ok(());
+        };
+        let mc = |source| RecordError::Mcap {
+            path: f.path.clone(),
+            source,
+        };
+        if let Some(t) = &frame.truth {
+            let json = serde_json::to_vec(&**t).unwrap_or_default();
+            let header = mcap::records::MessageHeader {
+                channel_id: f.truth_ch,
+                sequence: f.image_seq,
+                log_time: frame.receive_ns,
+                publish_time: frame.capture_ns,
+            };
+            f.writer
+                .write_to_known_channel(&header, &json)
+                .map_err(mc)?;
+            f.bytes += json.len() as u64 + 40;
+        }
+        image_msg::encode_ros2_image(
+            &mut self.scratch,
+            frame.capture_ns,
+            &self.opts.frame_id,
+            frame.width,
+            frame.height,
+            frame.format,
+            &frame.data,
+        );
+        let header = mcap::records::MessageHeader {
+            channel_id: f.image_ch,
+            sequence: f.image_seq,
+            log_time: frame.receive_ns,
+            publish_time: frame.capture_ns,
+        };
+        f.image_seq = f.image_seq.wrapping_add(1);
+        f.writer
+            .write_to_known_channel(&header, &self.scratch)
+            .map_err(mc)?;
+        // Close the chunk so the frame is complete on disk once the OS writes it back.
+        f.writer.flush().map_err(mc)?;
+        f.bytes += self.scratch.len() as u64 + 100;
+        self.bytes_written += self.scratch.len() as u64;
+        self.frames_written += 1;
+        self.after_write()
+    }
+
+    /// Records an estimate. A recording that has stopped ignores it.
+    pub fn write_estimate(&mut self, e: &Estimate) -> Result<(), RecordError> {
+        self.before_write(4096)?;
+        let Some(f) = self.file.as_mut() else {
+            return Ok(());
+        };
+        let json = e.to_json();
+        let header = mcap::records::MessageHeader {
+            channel_id: f.estimate_ch,
+            sequence: f.estimate_seq,
+            log_time: e.publish_ns.max(e.receive_ns),
+            publish_time: e.capture_ns,
+        };
+        f.estimate_seq = f.estimate_seq.wrapping_add(1);
+        f.writer
+            .write_to_known_channel(&header, json.as_bytes())
+            .map_err(|source| RecordError::Mcap {
+                path: f.path.clone(),
+                source,
+            })?;
+        f.bytes += json.len() as u64 + 40;
+        self.bytes_written += json.len() as u64;
+        self.after_write()
+    }
+
+    /// Rotation and the disk reserve, checked before each write.
+    fn before_write(&mut self, need: u64) -> Result<(), RecordError> {
+        if self.file.is_none() {
+            return Ok(());
+        }
+        // Check free space every 64 MB written or every second, whichever comes first.
+        self.since_space_check += need;
+        let due = self.last_space_check.elapsed() >= Duration::from_secs(1)
+            || self.since_space_check >= 64 << 20;
+        if due && !self.space_ok(need)? {
+            self.close_file()?;
+            tracing::error!(
+                dir = %self.opts.dir.display(),
+                reserve_mb = self.opts.reserve_bytes >> 20,
+                "recording stopped: free space reached the reserve; detection goes on"
+            );
+            self.state = RecordState::StoppedDiskFull;
+            return Ok(());
+        }
+        let f = self.file.as_ref().expect("checked above");
+        let by_size = self.opts.rotate_bytes > 0 && f.bytes + need > self.opts.rotate_bytes;
+        let by_time =
+            !self.opts.rotate_after.is_zero() && f.opened.elapsed() >= self.opts.rotate_after;
+        if (by_size || by_time) && f.bytes > 0 {
+            self.close_file()?;
+            self.open()?;
+        }
+        Ok(())
+    }
+
+    fn after_write(&mut self) -> Result<(), RecordError> {
+        if self.last_sync.elapsed() >= self.opts.sync_interval {
+            self.sync()?;
+        }
+        Ok(())
+    }
+
+    /// Closes the current chunk and syncs the file's data to disk.
+    pub fn sync(&mut self) -> Result<(), RecordError> {
+        self.last_sync = Instant::now();
+        let Some(f) = self.file.as_mut() else {
+            return Ok(());
+        };
+        let path = f.path.clone();
+        f.writer.flush().map_err(|source| RecordError::Mcap {
+            path: path.clone(),
+            source,
+        })?;
+        // The mcap writer owns the BufWriter; flushing the chunk flushed it to the File.
+        sync_path(&path).map_err(|source| RecordError::Io { path, source })
+    }
+
+    fn close_file(&mut self) -> Result<(), RecordError> {
+        if let Some(mut f) = self.file.take() {
+            let summary = f.writer.finish().map_err(|source| RecordError::Mcap {
+                path: f.path.clone(),
+                source,
+            })?;
+            let inner = f.writer.into_inner();
+            let file = inner.into_inner().map_err(|e| RecordError::Io {
+                path: f.path.clone(),
+                source: e.into_error(),
+            })?;
+            file.sync_all().map_err(|source| RecordError::Io {
+                path: f.path.clone(),
+                source,
+            })?;
+            let n = summary.stats.map(|s| s.message_count).unwrap_or_default();
+            tracing::info!(file = %f.path.display(), messages = n, "recording closed");
+        }
+        Ok(())
+    }
+
+    /// Writes the summary of the open file, syncs it and closes it. Idempotent.
+    pub fn finish(&mut self) -> Result<(), RecordError> {
+        let r = self.close_file();
+        if matches!(self.state, RecordState::Recording(_)) {
+            self.state = RecordState::Closed;
+        }
+        r
+    }
+
+    /// Marks the recorder failed after an error (the caller logs it); no more writes.
+    pub fn fail(&mut self, why: String) {
+        let _ = self.close_file();
+        self.state = RecordState::Failed(why);
+    }
+}
+
+impl Drop for Recorder {
+    fn drop(&mut self) {
+        if let Err(e) = self.finish() {
+            tracing::error!("closing the recording: {e}");
+        }
+    }
+}
+
+/// fsync of a file's data through a second handle (the writer keeps its own).
+fn sync_path(path: &Path) -> std::io::Result<()> {
+    File::options().write(true).open(path)?.sync_data()
+}
+
+/// Free bytes for an unprivileged user on the file system holding `dir` (statvfs).
+pub fn free_bytes(dir: &Path) -> std::io::Result<u64> {
+    use std::os::unix::ffi::OsStrExt;
+    let c = std::ffi::CString::new(dir.as_os_str().as_bytes())
+        .map_err(|_| std::io::Error::other("path contains NUL"))?;
+    let mut st: libc::statvfs = unsafe { std::mem::zeroed() };
+    // SAFETY: `c` is a valid NUL-terminated path and `st` a valid out-pointer.
+    let rc = unsafe { libc::statvfs(c.as_ptr(), &mut st) };
+    if rc != 0 {
+        return Err(std::io::Error::last_os_error());
+    }
+    Ok(st.f_bavail as u64 * st.f_frsize as u64)
+}
+
+/// `YYYYmmddTHHMMSSZ` from ns since the epoch (civil-from-days, proleptic Gregorian).
+fn utc_stamp(ns: u64) -> String {
+    let secs = ns / 1_000_000_000;
+    let (days, sod) = ((secs / 86_400) as i64, secs % 86_400);
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = doy - (153 * mp + 2) / 5 + 1;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 };
+    let y = yoe + era * 400 + i64::from(m <= 2);
+    format!(
+        "{y:04}{m:02}{d:02}T{:02}{:02}{:02}Z",
+        sod / 3600,
+        sod % 3600 / 60,
+        sod % 60
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn utc_stamp_known_dates() {
+        assert_eq!(utc_stamp(0), "19700101T000000Z");
+        assert_eq!(utc_stamp(1_700_000_000 * 1_000_000_000), "20231114T221320Z");
+        assert_eq!(utc_stamp(951_782_400 * 1_000_000_000), "20000229T000000Z");
+    }
+
+    #[test]
+    fn free_bytes_of_tmp() {
+        assert!(free_bytes(&std::env::temp_dir()).unwrap() > 0);
+        assert!(free_bytes(Path::new("/definitely/not/here")).is_err());
+    }
+}

@@ -1,0 +1,438 @@
+//! The field: parallel rows of identical four-leaved plants on flat ground, plus weeds.
+//!
+//! Owns the world model the renderer samples: rows along world +X at y = i·spacing, a plant
+//! every `plant_distance_m` along each (plant k of row i nominally at (k·distance, i·spacing)),
+//! each plant's position error along and across its row (Gaussian, truncated at ±3σ so that a
+//! lookup only needs a bounded window), and weeds (the same plant at uniformly random positions
+//! around the camera, in a bucket grid). [`Field::plant_at`] answers "which plant covers this
+//! ground point" in constant time.
+
+use super::options::SynthOptions;
+use super::rng::Rng;
+
+/// Position errors are truncated at this many standard deviations.
+const TRUNCATE_SD: f64 = 3.0;
+
+/// ⌊v⌋ as an integer without a libm call (v within ±2^62).
+#[inline]
+pub(crate) fn floor_i(v: f64) -> i64 {
+    let t = v as i64;
+    t - ((t as f64) > v) as i64
+}
+
+/// ⌈v⌉ as an integer without a libm call (v within ±2^62).
+#[inline]
+pub(crate) fn ceil_i(v: f64) -> i64 {
+    let t = v as i64;
+    t + ((t as f64) < v) as i64
+}
+
+/// The plant model: four elliptic leaves around the stem, at 45° to the row, identical for
+/// every plant (no scaling, no rotation, as in the paper).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlantShape {
+    /// Half the leaf length (semi-major axis), metres.
+    half_length: f64,
+    /// Half the leaf width (semi-minor axis), metres.
+    half_width: f64,
+}
+
+impl PlantShape {
+    pub fn new(leaf_length_m: f64, leaf_width_m: f64) -> Self {
+        PlantShape {
+            half_length: leaf_length_m / 2.0,
+            half_width: leaf_width_m / 2.0,
+        }
+    }
+
+    /// Largest distance of any leaf point from the stem, metres (the leaf length).
+    #[inline]
+    pub fn reach(&self) -> f64 {
+        2.0 * self.half_length
+    }
+
+    /// Whether ground offset (dx, dy) from the stem lies on a leaf (or the stem). Returns the elliptic
+    /// radius in [0, 1] of the point within its leaf (0 on the leaf's centre, 1 on its edge).
+    #[inline]
+    pub fn leaf_at(&self, dx: f64, dy: f64) -> Option<f64> {
+        let reach = self.reach();
+        if dx.abs() > reach || dy.abs() > reach {
+            return None;
+        }
+        let s = std::f64::consts::FRAC_1_SQRT_2;
+        let u = (dx + dy) * s;
+        let v = (dy - dx) * s;
+        let (a, b) = (self.half_length, self.half_width);
+        let e1 = ((u.abs() - a) / a).powi(2) + (v / b).powi(2);
+        let e2 = ((v.abs() - a) / a).powi(2) + (u / b).powi(2);
+        // the stem: a disc as wide as a leaf
+        let e0 = (dx * dx + dy * dy) / (b * b);
+        let e = e1.min(e2).min(e0);
+        (e <= 1.0).then_some(e)
+    }
+}
+
+/// Weeds bucketed in a uniform grid; each weed is listed in every cell its reach overlaps,
+/// so a lookup reads one cell.
+#[derive(Debug, Clone, PartialEq)]
+struct WeedGrid {
+    origin: [f64; 2],
+    cell: f64,
+    nx: usize,
+    ny: usize,
+    /// CSR: weeds of cell (ix, iy) are `items[start[iy*nx+ix] .. start[iy*nx+ix+1]]`.
+    start: Vec<u32>,
+    items: Vec<[f64; 2]>,
+}
+
+impl WeedGrid {
+    fn new(weeds: &[[f64; 2]], centre: [f64; 2], half: f64, reach: f64) -> Self {
+        let origin = [centre[0] - half - reach, centre[1] - half - reach];
+        let span = 2.0 * (half + reach);
+        let cell = (2.0 * reach).max(span / 1024.0);
+        let n = ((span / cell).ceil() as usize).max(1);
+        let (nx, ny) = (n, n);
+        let cells_of = |p: &[f64; 2]| {
+            let lo =
+                |v: f64, o: f64| (((v - reach - o) / cell).floor().max(0.0) as usize).min(n - 1);
+            let hi =
+                |v: f64, o: f64| (((v + reach - o) / cell).floor().max(0.0) as usize).min(n - 1);
+            (
+                lo(p[0], origin[0])..=hi(p[0], origin[0]),
+                lo(p[1], origin[1])..=hi(p[1], origin[1]),
+            )
+        };
+        let mut count = vec![0u32; nx * ny + 1];
+        for p in weeds {
+            let (xs, ys) = cells_of(p);
+            for iy in ys {
+                for ix in xs.clone() {
+                    count[iy * nx + ix + 1] += 1;
+                }
+            }
+        }
+        for i in 1..count.len() {
+            count[i] += count[i - 1];
+        }
+        let start = count;
+        let mut fill = start.clone();
+        let mut items = vec![[0.0; 2]; start[nx * ny] as usize];
+        for p in weeds {
+            let (xs, ys) = cells_of(p);
+            for iy in ys {
+                for ix in xs.clone() {
+                    let slot = &mut fill[iy * nx + ix];
+                    items[*slot as usize] = *p;
+                    *slot += 1;
+                }
+            }
+        }
+        WeedGrid {
+            origin,
+            cell,
+            nx,
+            ny,
+            start,
+            items,
+        }
+    }
+
+    /// True when no weed reaches into the rectangle (checks at most 16 cells, else says false).
+    #[inline]
+    fn is_bare(&self, x0: f64, x1: f64, y0: f64, y1: f64) -> bool {
+        if self.items.is_empty() {
+            return true;
+        }
+        let span_x = self.cell * self.nx as f64;
+        let span_y = self.cell * self.ny as f64;
+        let (ax0, ax1) = (x0 - self.origin[0], x1 - self.origin[0]);
+        let (ay0, ay1) = (y0 - self.origin[1], y1 - self.origin[1]);
+        if ax1 < 0.0 || ay1 < 0.0 || ax0 >= span_x || ay0 >= span_y {
+            return true;
+        }
+        let inv = 1.0 / self.cell;
+        let cx0 = floor_i(ax0 * inv).max(0) as usize;
+        let cx1 = (floor_i(ax1 * inv).max(0) as usize).min(self.nx - 1);
+        let cy0 = floor_i(ay0 * inv).max(0) as usize;
+        let cy1 = (floor_i(ay1 * inv).max(0) as usize).min(self.ny - 1);
+        if (cx1 - cx0 + 1) * (cy1 - cy0 + 1) > 16 {
+            return false;
+        }
+        (cy0..=cy1).all(|cy| {
+            (cx0..=cx1).all(|cx| {
+                let i = cy * self.nx + cx;
+                self.start[i] == self.start[i + 1]
+            })
+        })
+    }
+
+    #[inline]
+    fn candidates(&self, x: f64, y: f64) -> &[[f64; 2]] {
+        let fx = (x - self.origin[0]) / self.cell;
+        let fy = (y - self.origin[1]) / self.cell;
+        if !(fx >= 0.0 && fy >= 0.0 && fx < self.nx as f64 && fy < self.ny as f64) {
+            return &[];
+        }
+        let i = fy as usize * self.nx + fx as usize;
+        &self.items[self.start[i] as usize..self.start[i + 1] as usize]
+    }
+}
+
+/// The crop field: rows, plants with their position errors, and weeds.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Field {
+    shape: PlantShape,
+    row_spacing: f64,
+    plant_distance: f64,
+    inv_spacing: f64,
+    inv_distance: f64,
+    /// Row indices i in `row_min..=row_max` (rows at y = i·row_spacing).
+    row_min: i64,
+    row_max: i64,
+    /// Plant indices k in `k_min..=k_max` (plants nominally at x = k·plant_distance).
+    k_min: i64,
+    k_max: i64,
+    /// Per plant (row-major: row, then k) position error (along, across), metres; empty
+    /// when there is no position noise.
+    offsets: Vec<[f32; 2]>,
+    /// Lookup half-windows: leaf reach plus the largest position error.
+    window_x: f64,
+    window_y: f64,
+    weeds: WeedGrid,
+    weed_count: usize,
+}
+
+/// Which plant, if any, covers a ground point.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Cover {
+    Soil,
+    /// A leaf; `edge` is the elliptic radius in [0, 1] within the leaf.
+    Plant {
+        edge: f64,
+    },
+}
+
+impl Field {
+    /// Builds the field of `opts`, drawing the position errors and the weeds from `seed`.
+    /// `camera_xy` is the camera's ground position (the weeds are scattered around it).
+    pub fn new(opts: &SynthOptions, seed: u64, camera_xy: [f64; 2]) -> Self {
+        let shape = PlantShape::new(opts.leaf_length_m, opts.leaf_width_m);
+        let s = opts.row_spacing_m;
+        let pd = opts.plant_distance_m;
+        let row_min = (-opts.field_half_width_m / s).ceil() as i64;
+        let row_max = (opts.field_half_width_m / s).floor() as i64;
+        let k_min = (-opts.field_half_length_m / pd).ceil() as i64;
+        let k_max = (opts.field_half_length_m / pd).floor() as i64;
+        let noisy = opts.along_sd_m > 0.0 || opts.across_sd_m > 0.0;
+        let mut offsets = Vec::new();
+        let (mut max_x, mut max_y) = (0.0f64, 0.0f64);
+        if noisy {
+            let n = ((row_max - row_min + 1) * (k_max - k_min + 1)) as usize;
+            offsets.reserve_exact(n);
+            let mut rng = Rng::stream(seed, 1);
+            let mut truncated = |sd: f64| -> f64 {
+                if sd == 0.0 {
+                    return 0.0;
+                }
+                loop {
+                    let z = rng.normal();
+                    if z.abs() <= TRUNCATE_SD {
+                        return z * sd;
+                    }
+                }
+            };
+            for _ in 0..n {
+                let ox = truncated(opts.along_sd_m) as f32;
+                let oy = truncated(opts.across_sd_m) as f32;
+                max_x = max_x.max((ox as f64).abs());
+                max_y = max_y.max((oy as f64).abs());
+                offsets.push([ox, oy]);
+            }
+        }
+        let reach = shape.reach();
+        let mut rng = Rng::stream(seed, 2);
+        let half = opts.weed_area_half_m;
+        let weeds: Vec<[f64; 2]> = (0..opts.weeds)
+            .map(|_| {
+                [
+                    camera_xy[0] + rng.range(-half, half),
+                    camera_xy[1] + rng.range(-half, half),
+                ]
+            })
+            .collect();
+        Field {
+            shape,
+            row_spacing: s,
+            plant_distance: pd,
+            inv_spacing: 1.0 / s,
+            inv_distance: 1.0 / pd,
+            row_min,
+            row_max,
+            k_min,
+            k_max,
+            offsets,
+            window_x: reach + max_x + 1e-9,
+            window_y: reach + max_y + 1e-9,
+            weeds: WeedGrid::new(&weeds, camera_xy, half, reach),
+            weed_count: weeds.len(),
+        }
+    }
+
+    /// Indices of the rows, lowest to highest; row i runs along y = i·row_spacing.
+    pub fn rows(&self) -> std::ops::RangeInclusive<i64> {
+        self.row_min..=self.row_max
+    }
+
+    /// Indices of the plants along each row; plant k sits nominally at x = k·plant_distance.
+    pub fn plant_indices(&self) -> std::ops::RangeInclusive<i64> {
+        self.k_min..=self.k_max
+    }
+
+    pub fn row_spacing(&self) -> f64 {
+        self.row_spacing
+    }
+
+    pub fn plant_distance(&self) -> f64 {
+        self.plant_distance
+    }
+
+    pub fn shape(&self) -> &PlantShape {
+        &self.shape
+    }
+
+    pub fn weed_count(&self) -> usize {
+        self.weed_count
+    }
+
+    /// Ground position (x, y) of plant k of row i, position error included.
+    pub fn plant_position(&self, row: i64, k: i64) -> [f64; 2] {
+        let (ox, oy) = self.offset(row, k);
+        [
+            k as f64 * self.plant_distance + ox,
+            row as f64 * self.row_spacing + oy,
+        ]
+    }
+
+    #[inline]
+    fn offset(&self, row: i64, k: i64) -> (f64, f64) {
+        if self.offsets.is_empty() {
+            return (0.0, 0.0);
+        }
+        let per_row = (self.k_max - self.k_min + 1) as usize;
+        let o = self.offsets[(row - self.row_min) as usize * per_row + (k - self.k_min) as usize];
+        (o[0] as f64, o[1] as f64)
+    }
+
+    /// True when no plant or weed reaches into the ground rectangle [x0, x1] × [y0, y1].
+    /// (Conservative: may say false for a bare rectangle, never true for a covered one.)
+    #[inline]
+    pub fn is_bare(&self, x0: f64, x1: f64, y0: f64, y1: f64) -> bool {
+        let i_lo = ceil_i((y0 - self.window_y) * self.inv_spacing).max(self.row_min);
+        let i_hi = floor_i((y1 + self.window_y) * self.inv_spacing).min(self.row_max);
+        if i_lo <= i_hi {
+            let k_lo = ceil_i((x0 - self.window_x) * self.inv_distance).max(self.k_min);
+            let k_hi = floor_i((x1 + self.window_x) * self.inv_distance).min(self.k_max);
+            if k_lo <= k_hi {
+                return false;
+            }
+        }
+        self.weeds.is_bare(x0, x1, y0, y1)
+    }
+
+    /// What covers ground point (x, y).
+    #[inline]
+    pub fn cover_at(&self, x: f64, y: f64) -> Cover {
+        let s = self.row_spacing;
+        let pd = self.plant_distance;
+        let i_lo = ceil_i((y - self.window_y) * self.inv_spacing).max(self.row_min);
+        let i_hi = floor_i((y + self.window_y) * self.inv_spacing).min(self.row_max);
+        if i_lo <= i_hi {
+            let k_lo = ceil_i((x - self.window_x) * self.inv_distance).max(self.k_min);
+            let k_hi = floor_i((x + self.window_x) * self.inv_distance).min(self.k_max);
+            for i in i_lo..=i_hi {
+                let yi = i as f64 * s;
+                for k in k_lo..=k_hi {
+                    let (ox, oy) = self.offset(i, k);
+                    if let Some(edge) = self.shape.leaf_at(x - (k as f64 * pd + ox), y - (yi + oy))
+                    {
+                        return Cover::Plant { edge };
+                    }
+                }
+            }
+        }
+        for w in self.weeds.candidates(x, y) {
+            if let Some(edge) = self.shape.leaf_at(x - w[0], y - w[1]) {
+                return Cover::Plant { edge };
+            }
+        }
+        Cover::Soil
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn plant_has_four_leaves_and_a_stem() {
+        let p = PlantShape::new(0.04, 0.015);
+        assert!(p.leaf_at(0.0, 0.0).is_some());
+        let d = 0.02 * std::f64::consts::FRAC_1_SQRT_2;
+        // leaf centres along the four diagonals
+        for (sx, sy) in [(1.0, 1.0), (-1.0, 1.0), (1.0, -1.0), (-1.0, -1.0)] {
+            let e = p.leaf_at(sx * d, sy * d).unwrap();
+            assert!(e < 1e-9);
+        }
+        // between the leaves (along the row axis, beyond the stem) is soil
+        assert!(p.leaf_at(0.03, 0.0).is_none());
+        assert!(p.leaf_at(0.0, -0.03).is_none());
+        // beyond the tips
+        assert!(p.leaf_at(0.03, 0.03).is_none());
+    }
+
+    #[test]
+    fn plants_sit_on_rows_and_weeds_are_found() {
+        let opts = SynthOptions {
+            weeds: 50,
+            weed_area_half_m: 2.0,
+            ..Default::default()
+        };
+        let f = Field::new(&opts, 3, [0.0, 0.0]);
+        // stem of plant 4 in row -2
+        assert_eq!(f.cover_at(4.0 * 0.15, -1.0), Cover::Plant { edge: 0.0 });
+        // half-way between plants and between rows: soil, unless a weed is there
+        let weed = f.weeds.items[0];
+        assert!(matches!(f.cover_at(weed[0], weed[1]), Cover::Plant { .. }));
+        assert!(f.weeds.items.len() >= 50);
+        // outside the field: no plants
+        assert_eq!(f.cover_at(151.0, 0.0), Cover::Soil);
+        assert_eq!(f.cover_at(0.0, 150.5), Cover::Soil);
+    }
+
+    #[test]
+    fn position_noise_is_bounded_and_moves_plants() {
+        let opts = SynthOptions {
+            along_sd_m: 0.01,
+            across_sd_m: 0.02,
+            field_half_length_m: 10.0,
+            field_half_width_m: 5.0,
+            ..Default::default()
+        };
+        let f = Field::new(&opts, 9, [0.0, 0.0]);
+        let mut sum_y2 = 0.0;
+        let mut n = 0.0;
+        for i in f.rows() {
+            for k in f.plant_indices() {
+                let p = f.plant_position(i, k);
+                let (dx, dy) = (p[0] - k as f64 * 0.15, p[1] - i as f64 * 0.5);
+                assert!(dx.abs() <= 0.03 + 1e-6 && dy.abs() <= 0.06 + 1e-6);
+                sum_y2 += dy * dy;
+                n += 1.0;
+                // the displaced stem is found
+                assert!(matches!(f.cover_at(p[0], p[1]), Cover::Plant { .. }));
+            }
+        }
+        let sd = (sum_y2 / n).sqrt();
+        assert!((sd - 0.02).abs() < 0.002, "{sd}");
+    }
+}

@@ -1,0 +1,479 @@
+//! The renderer: a scene seen through a calibrated omnidirectional camera.
+//!
+//! Owns [`Renderer`]. Setup (once per calibration) computes the unit ray of every pixel
+//! corner and the field-of-view mask; a render then, for every pixel inside the mask, turns
+//! its four corner rays into the world, and samples the pixel's footprint on the ground:
+//! 2×2 samples where the footprint is small against a leaf and they all agree, else n×n
+//! (`samples`), so that far rows merge into solid lines as through real optics. Rays above
+//! the horizon see sky. Pixels outside the mask are black. Then the background noise
+//! (salt and pepper, then Gaussian smoothing), and for the Bayer style the RGGB mosaic.
+//! Rendering runs on up to `threads` threads over bands of rows and allocates nothing once
+//! the scratch buffers exist.
+
+use super::field::Cover;
+use super::noise;
+use super::options::Style;
+use super::scene::Scene;
+use super::SynthError;
+use crate::camera::Calibration;
+use nalgebra::{Matrix3, Vector3};
+use std::sync::Mutex;
+
+/// Rows per work item handed to a thread.
+const BAND_ROWS: usize = 8;
+
+/// Renders scenes through one calibration.
+#[derive(Debug, Clone)]
+pub struct Renderer {
+    cal: Calibration,
+    width: usize,
+    height: usize,
+    /// Unit rays (camera frame) at pixel corners (row − ½, col − ½), (height+1)×(width+1).
+    corners: Vec<[f32; 3]>,
+    /// Per pixel: inside the field of view.
+    inside: Vec<bool>,
+    threads: usize,
+    /// RGB scratch image for the Bayer style.
+    rgb: Vec<u8>,
+    /// Scratch for the Gaussian smoothing.
+    tmp: Vec<u8>,
+}
+
+/// Sample class, to decide whether a pixel's first samples agree.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Class {
+    Sky,
+    Soil,
+    Plant,
+}
+
+impl Renderer {
+    /// Prepares rendering through `cal` (heavy: one ray per pixel corner). Uses the
+    /// calibration's mask, or where it has none, the range over which its model is valid.
+    /// Renders on as many threads as the machine offers.
+    pub fn new(cal: &Calibration) -> Result<Self, SynthError> {
+        let (h, w) = cal.size();
+        let (h, w) = (h as usize, w as usize);
+        if h * w > 64_000_000 {
+            return Err(SynthError::Calibration(format!(
+                "image {w}x{h} is too large to render (at most 64 megapixels)"
+            )));
+        }
+        let m = &cal.model;
+        let mut corners = Vec::with_capacity((h + 1) * (w + 1));
+        for r in 0..=h {
+            for c in 0..=w {
+                let ray = m.cam2world(r as f64 - 0.5, c as f64 - 0.5);
+                corners.push([ray.x as f32, ray.y as f32, ray.z as f32]);
+            }
+        }
+        let mut inside = Vec::with_capacity(h * w);
+        for r in 0..h {
+            for c in 0..w {
+                let (rf, cf) = (r as f64, c as f64);
+                let ok = cal.pixel_in_fov(rf, cf)
+                    && (cal.mask.is_some() || cal.pixel_in_model_range(rf, cf));
+                inside.push(ok);
+            }
+        }
+        if !inside.iter().any(|&b| b) {
+            return Err(SynthError::Calibration(
+                "no pixel of the calibration lies inside its field of view".into(),
+            ));
+        }
+        let threads = std::thread::available_parallelism()
+            .map(|n| n.get())
+            .unwrap_or(1)
+            .clamp(1, 16);
+        Ok(Renderer {
+            cal: cal.clone(),
+            width: w,
+            height: h,
+            corners,
+            inside,
+            threads,
+            rgb: Vec::new(),
+            tmp: Vec::new(),
+        })
+    }
+
+    /// Sets the number of threads a render uses (at least 1).
+    pub fn with_threads(mut self, threads: usize) -> Self {
+        self.threads = threads.max(1);
+        self
+    }
+
+    pub fn calibration(&self) -> &Calibration {
+        &self.cal
+    }
+
+    /// Image width and height in pixels.
+    pub fn size(&self) -> (u32, u32) {
+        (self.width as u32, self.height as u32)
+    }
+
+    /// Bytes an image of `style` needs.
+    pub fn buffer_len(&self, style: Style) -> usize {
+        self.width * self.height * style.pixel_format().bytes_per_pixel()
+    }
+
+    /// Renders `scene` into `out` (row-major, `buffer_len(scene.options.style)` bytes, in the
+    /// style's pixel format).
+    pub fn render_into(&mut self, scene: &Scene, out: &mut [u8]) -> Result<(), SynthError> {
+        let style = scene.options.style;
+        let expected = self.buffer_len(style);
+        if out.len() != expected {
+            return Err(SynthError::BufferSize {
+                expected,
+                actual: out.len(),
+            });
+        }
+        let (w, h) = (self.width, self.height);
+        let mut rgb = std::mem::take(&mut self.rgb);
+        let mut tmp = std::mem::take(&mut self.tmp);
+        let channels = if style == Style::Grey { 1 } else { 3 };
+        let target: &mut [u8] = if style == Style::Bayer {
+            rgb.resize(w * h * 3, 0);
+            &mut rgb
+        } else {
+            out
+        };
+        self.shade(scene, target, channels);
+        if scene.options.noise > 0.0 {
+            noise::salt_and_pepper(target, channels, scene.options.noise, scene.seed);
+            tmp.resize(target.len(), 0);
+            noise::gaussian_blur(
+                target,
+                &mut tmp,
+                w,
+                h,
+                channels,
+                scene.options.noise_blur_px,
+                self.threads,
+            );
+            // The mask is applied after the smoothing, as in the paper.
+            for (px, &ins) in target.chunks_exact_mut(channels).zip(&self.inside) {
+                if !ins {
+                    px.fill(0);
+                }
+            }
+        }
+        if style == Style::Bayer {
+            super::bayer::mosaic(&rgb, out, w, h);
+        }
+        self.rgb = rgb;
+        self.tmp = tmp;
+        Ok(())
+    }
+
+    /// Shades every pixel into `out` (grey or RGB).
+    fn shade(&self, scene: &Scene, out: &mut [u8], channels: usize) {
+        let rot = scene.pose.world_from_camera.matrix().clone_owned();
+        let row_bytes = self.width * channels;
+        let bands = Mutex::new(out.chunks_mut(row_bytes * BAND_ROWS).enumerate());
+        let work = || loop {
+            let next = bands.lock().map(|mut it| it.next()).unwrap_or(None);
+            let Some((b, band)) = next else { break };
+            for (j, row) in band.chunks_mut(row_bytes).enumerate() {
+                self.shade_row(scene, &rot, b * BAND_ROWS + j, row, channels);
+            }
+        };
+        if self.threads <= 1 {
+            work();
+        } else {
+            std::thread::scope(|s| {
+                for _ in 1..self.threads {
+                    s.spawn(work);
+                }
+                work();
+            });
+        }
+    }
+
+    fn shade_row(
+        &self,
+        scene: &Scene,
+        rot: &Matrix3<f64>,
+        r: usize,
+        out: &mut [u8],
+        channels: usize,
+    ) {
+        let w = self.width;
+        let cw = w + 1;
+        let world = |i: usize| {
+            let v = self.corners[i];
+            rot * Vector3::new(v[0] as f64, v[1] as f64, v[2] as f64)
+        };
+        let o = &scene.options;
+        let n = o.samples as usize;
+        // Footprints smaller than this (metres) need only 2×2 samples when those agree.
+        let fine = 0.5 * o.leaf_width_m.min(o.leaf_length_m);
+        let c0 = scene.pose.centre;
+        for col in 0..w {
+            let px = &mut out[col * channels..(col + 1) * channels];
+            if !self.inside[r * w + col] {
+                px.fill(0);
+                continue;
+            }
+            let d00 = world(r * cw + col);
+            let d01 = world(r * cw + col + 1);
+            let d10 = world((r + 1) * cw + col);
+            let d11 = world((r + 1) * cw + col + 1);
+            let ground = |d: &Vector3<f64>| {
+                (d.z < 0.0).then(|| {
+                    let t = c0.z / -d.z;
+                    [c0.x + t * d.x, c0.y + t * d.y]
+                })
+            };
+            // Footprint on the ground (metres, the longer diagonal) when all of the pixel
+            // sees the ground; a pixel that no plant reaches is plain soil.
+            let mut footprint = f64::INFINITY;
+            if let (Some(a), Some(b), Some(c), Some(d)) =
+                (ground(&d00), ground(&d01), ground(&d10), ground(&d11))
+            {
+                let diag1 = (a[0] - d[0]).powi(2) + (a[1] - d[1]).powi(2);
+                let diag2 = (b[0] - c[0]).powi(2) + (b[1] - c[1]).powi(2);
+                footprint = diag1.max(diag2).sqrt();
+                let x0 = a[0].min(b[0]).min(c[0]).min(d[0]);
+                let x1 = a[0].max(b[0]).max(c[0]).max(d[0]);
+                let y0 = a[1].min(b[1]).min(c[1]).min(d[1]);
+                let y1 = a[1].max(b[1]).max(c[1]).max(d[1]);
+                if scene.field.is_bare(x0, x1, y0, y1) {
+                    let p = &scene.palette;
+                    if channels == 1 {
+                        px[0] = p.grey_soil.round() as u8;
+                    } else {
+                        let (cx, cy) = (0.25 * (x0 + x1) * 2.0, 0.25 * (y0 + y1) * 2.0);
+                        let rgb = p.soil_rgb(scene.texture.filtered(cx, cy, footprint));
+                        for k in 0..3 {
+                            px[k] = rgb[k].round().clamp(0.0, 255.0) as u8;
+                        }
+                    }
+                    continue;
+                }
+            }
+            let sample = |u: f64, v: f64| -> (Class, [f32; 3]) {
+                let d = (d00 * (1.0 - v) + d01 * v) * (1.0 - u) + (d10 * (1.0 - v) + d11 * v) * u;
+                shade_ray(scene, &c0, &d, footprint)
+            };
+            let small = footprint < fine;
+            let mut acc = [0.0f32; 3];
+            let mut done = false;
+            if small || n <= 2 {
+                let mut first = None;
+                let mut agree = true;
+                for (u, v) in [(0.25, 0.25), (0.25, 0.75), (0.75, 0.25), (0.75, 0.75)] {
+                    let (cls, c) = sample(u, v);
+                    agree &= *first.get_or_insert(cls) == cls;
+                    for k in 0..3 {
+                        acc[k] += c[k] * 0.25;
+                    }
+                }
+                done = agree || n <= 2;
+            }
+            if !done {
+                acc = [0.0; 3];
+                let inv = 1.0 / (n * n) as f32;
+                for i in 0..n {
+                    let u = (i as f64 + 0.5) / n as f64;
+                    for j in 0..n {
+                        let v = (j as f64 + 0.5) / n as f64;
+                        let (_, c) = sample(u, v);
+                        for k in 0..3 {
+                            acc[k] += c[k] * inv;
+                        }
+                    }
+                }
+            }
+            if channels == 1 {
+                px[0] = acc[0].round().clamp(0.0, 255.0) as u8;
+            } else {
+                for k in 0..3 {
+                    px[k] = acc[k].round().clamp(0.0, 255.0) as u8;
+                }
+            }
+        }
+    }
+}
+
+/// Colour (grey in channel 0 for the grey style) of the world ray `d` from `centre`.
+#[inline]
+fn shade_ray(
+    scene: &Scene,
+    centre: &Vector3<f64>,
+    d: &Vector3<f64>,
+    footprint: f64,
+) -> (Class, [f32; 3]) {
+    let p = &scene.palette;
+    let grey = scene.options.style == Style::Grey;
+    if d.z >= 0.0 {
+        if grey {
+            return (Class::Sky, [p.grey_soil; 3]);
+        }
+        let s = (d.z / d.norm()) as f32;
+        return (Class::Sky, p.sky_rgb(s));
+    }
+    let t = centre.z / -d.z;
+    let (x, y) = (centre.x + t * d.x, centre.y + t * d.y);
+    match scene.field.cover_at(x, y) {
+        Cover::Plant { edge } => {
+            if grey {
+                (Class::Plant, [p.grey_plant; 3])
+            } else {
+                (Class::Plant, p.leaf_rgb(edge as f32))
+            }
+        }
+        Cover::Soil => {
+            if grey {
+                (Class::Soil, [p.grey_soil; 3])
+            } else {
+                (
+                    Class::Soil,
+                    p.soil_rgb(scene.texture.filtered(x, y, footprint)),
+                )
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::camera::{ideal_fisheye, ideal_pal};
+    use crate::synth::SynthOptions;
+
+    fn render(cal: &Calibration, opts: &SynthOptions, seed: u64) -> Vec<u8> {
+        let scene = Scene::new(opts, seed, &cal.mounting).unwrap();
+        let mut r = Renderer::new(cal).unwrap().with_threads(2);
+        let mut out = vec![0u8; r.buffer_len(opts.style)];
+        r.render_into(&scene, &mut out).unwrap();
+        out
+    }
+
+    #[test]
+    fn deterministic_and_thread_count_independent() {
+        let cal = ideal_fisheye(256, 306);
+        let opts = SynthOptions {
+            noise: 0.2,
+            weeds: 30,
+            along_sd_m: 0.01,
+            across_sd_m: 0.01,
+            style: Style::Colour,
+            field_half_length_m: 30.0,
+            field_half_width_m: 30.0,
+            ..Default::default()
+        };
+        let a = render(&cal, &opts, 9);
+        assert_eq!(a, render(&cal, &opts, 9));
+        let scene = Scene::new(&opts, 9, &cal.mounting).unwrap();
+        let mut one = Renderer::new(&cal).unwrap().with_threads(1);
+        let mut b = vec![0u8; a.len()];
+        one.render_into(&scene, &mut b).unwrap();
+        assert_eq!(a, b);
+        assert_ne!(a, render(&cal, &opts, 10));
+    }
+
+    #[test]
+    fn mask_is_black_and_pal_has_an_annulus() {
+        for (cal, inner) in [
+            (ideal_fisheye(256, 306), false),
+            (ideal_pal(256, 306), true),
+        ] {
+            let img = render(&cal, &SynthOptions::default(), 1);
+            let (h, w) = cal.size();
+            let m = cal.mask.unwrap();
+            let at = |r: f64, c: f64| img[r as usize * w as usize + c as usize];
+            // corners of the sensor are outside the image circle
+            assert_eq!(at(0.0, 0.0), 0);
+            assert_eq!(at(h as f64 - 1.0, w as f64 - 1.0), 0);
+            let (xc, yc) = (cal.model.xc.round(), cal.model.yc.round());
+            if inner {
+                assert_eq!(at(xc, yc), 0, "blind centre of the PAL");
+            } else {
+                assert!(at(xc, yc) > 0);
+            }
+            // a ring just inside the outer radius sees the ground: soil grey or brighter
+            let r = m.outer_radius_px - 3.0;
+            assert!(at(xc, yc + r) >= 30 && at(xc, yc - r) >= 30);
+        }
+    }
+
+    #[test]
+    fn background_noise_has_the_asked_density() {
+        let cal = ideal_fisheye(256, 306);
+        for density in [0.1, 0.4] {
+            let opts = SynthOptions {
+                noise: density,
+                noise_blur_px: 0.0,
+                ..Default::default()
+            };
+            let img = render(&cal, &opts, 3);
+            let clean = render(&cal, &SynthOptions::default(), 3);
+            let (mut inside, mut changed) = (0usize, 0usize);
+            let (_, w) = cal.size();
+            for (i, (&a, &b)) in img.iter().zip(&clean).enumerate() {
+                let (r, c) = ((i / w as usize) as f64, (i % w as usize) as f64);
+                if cal.pixel_in_fov(r, c) {
+                    inside += 1;
+                    // the clean image holds only soil, plant, and mixtures: never 0 or 255
+                    assert!(b > 0 && b < 255);
+                    changed += (a == 0 || a == 255) as usize;
+                }
+            }
+            let f = changed as f64 / inside as f64;
+            assert!((f - density).abs() < 0.02, "{f} vs {density}");
+        }
+    }
+
+    #[test]
+    fn bayer_is_the_mosaic_of_the_colour_image() {
+        let cal = ideal_pal(256, 306);
+        let colour = SynthOptions {
+            style: Style::Colour,
+            noise: 0.1,
+            ..Default::default()
+        };
+        let rgb = render(&cal, &colour, 4);
+        let raw = render(
+            &cal,
+            &SynthOptions {
+                style: Style::Bayer,
+                ..colour.clone()
+            },
+            4,
+        );
+        let (h, w) = cal.size();
+        let mut expect = vec![0u8; (h * w) as usize];
+        crate::synth::mosaic(&rgb, &mut expect, w as usize, h as usize);
+        assert_eq!(raw, expect);
+        // the colour image really is colour: plants green, sky blue somewhere
+        let green = rgb.chunks_exact(3).filter(|p| p[1] > p[0] + 15).count();
+        let blue = rgb.chunks_exact(3).filter(|p| p[2] > p[0] + 15).count();
+        assert!(blue > 20, "{blue}");
+        assert!(green > 20, "{green}");
+    }
+
+    #[test]
+    fn far_rows_are_anti_aliased() {
+        // Looking along the rows near the horizon, pixels hold partial coverage (grey levels
+        // between soil and plant), not just the two levels.
+        let cal = ideal_fisheye(512, 612);
+        let opts = SynthOptions {
+            plant_distance_m: 0.03,
+            ..Default::default()
+        };
+        let img = render(&cal, &opts, 1);
+        let mid = img.iter().filter(|&&v| v > 45 && v < 200).count();
+        assert!(mid > 500, "{mid}");
+    }
+
+    #[test]
+    fn wrong_buffer_size_is_an_error() {
+        let cal = ideal_fisheye(64, 80);
+        let scene = Scene::new(&SynthOptions::default(), 1, &cal.mounting).unwrap();
+        let mut r = Renderer::new(&cal).unwrap();
+        let mut out = vec![0u8; 10];
+        let e = r.render_into(&scene, &mut out).unwrap_err().to_string();
+        assert!(e.contains("5120") && e.contains("10"), "{e}");
+    }
+}
