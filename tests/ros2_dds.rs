@@ -25,38 +25,23 @@ const DIR: &str = env!("CARGO_MANIFEST_DIR");
 const BASE_NS: u64 = 1_700_000_000_000_000_000;
 const FRAME_NS: u64 = 50_000_000;
 
-/// The Python venv holding cyclonedds, or None (after failing in CI) with the reason printed.
+#[path = "ros2/venv.rs"]
+mod venv;
+
+/// The venv with cyclonedds and its `ddsls`.
 fn venv() -> Option<PathBuf> {
-    let dir = std::env::var_os("OMNIROW_CI_VENV")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(DIR).join(".venv-ci"));
-    let python = dir.join("bin/python");
-    let ddsls = dir.join("bin/ddsls");
-    let ok = python.is_file()
-        && ddsls.is_file()
-        && Command::new(&python)
-            .args(["-c", "import cyclonedds"])
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .status()
-            .is_ok_and(|s| s.success());
-    if ok {
-        return Some(dir);
-    }
-    let why = format!(
-        "no Python venv with cyclonedds at {} (run scripts/ci-python-env.sh)",
+    let dir = venv::venv("cyclonedds")?;
+    assert!(
+        dir.join("bin/ddsls").is_file(),
+        "{} has cyclonedds but no ddsls",
         dir.display()
     );
-    if std::env::var("CI").is_ok_and(|v| v == "true") {
-        panic!("{why}");
-    }
-    eprintln!("skipped: {why}");
-    None
+    Some(dir)
 }
 
 /// A DDS domain of its own for each test (and each concurrent test run on this machine).
 fn domain(k: u16) -> u16 {
-    100 + (std::process::id() % 30) as u16 * 4 + k
+    100 + (std::process::id() % 26) as u16 * 5 + k
 }
 
 fn config(domain: u16) -> Ros2Config {
@@ -65,6 +50,7 @@ fn config(domain: u16) -> Ros2Config {
         domain_id: Some(domain),
         networks: vec![IpAddr::V4(Ipv4Addr::LOCALHOST)],
         frame_id: "test_base".to_string(),
+        image_frame_id: "test_cam".to_string(),
         ..Ros2Config::default()
     }
 }
@@ -315,7 +301,7 @@ fn cyclone_dds_decodes_every_topic_as_published() {
     for m in &k["image_raw"] {
         let i = frame_index(m);
         image_frames.push(i);
-        assert_eq!(m["header"]["frame_id"], "test_base");
+        assert_eq!(m["header"]["frame_id"], "test_cam");
         assert_eq!(
             (m["width"].as_u64(), m["height"].as_u64()),
             (Some(8), Some(4))
@@ -505,4 +491,155 @@ fn reliability_is_what_the_config_says() {
         code, 0,
         "reliable reader got nothing from a reliable writer"
     );
+}
+
+mod node {
+    //! The ROS 2 publisher in the node's real pipeline: source thread, detector worker,
+    //! publisher thread, with `node_publisher` as the node calls it.
+    use super::*;
+    use omnirow::detect::{Detection, VanishingPoint};
+    use omnirow::frame::Frame;
+    use omnirow::pipeline::{Pipeline, PipelineOptions, Processor};
+    use omnirow::source::{Poll, Source, SourceError, SourceState};
+
+    /// 16×1 mono8 frames every 50 ms; the first 8 bytes are the frame index.
+    struct Paced {
+        next: u64,
+    }
+
+    fn frame_pixels(i: u64) -> Vec<u8> {
+        let mut p = i.to_le_bytes().to_vec();
+        p.extend((0..8u8).map(|k| k.wrapping_mul(29).wrapping_add(i as u8)));
+        p
+    }
+
+    impl Source for Paced {
+        fn describe(&self) -> String {
+            "paced test source".into()
+        }
+        fn poll(&mut self, _t: Duration) -> Result<Poll, SourceError> {
+            std::thread::sleep(Duration::from_millis(50));
+            let i = self.next;
+            self.next += 1;
+            Ok(Poll::Frame(Frame {
+                seq: i,
+                capture_ns: BASE_NS + i * FRAME_NS,
+                receive_ns: omnirow::frame::now_ns(),
+                width: 16,
+                height: 1,
+                format: PixelFormat::Mono8,
+                data: frame_pixels(i),
+                truth: None,
+            }))
+        }
+        fn state(&self) -> SourceState {
+            SourceState::Streaming
+        }
+    }
+
+    /// Answers frame i with `estimate(i)`'s heading, tilt and quality.
+    struct Known;
+
+    impl Processor for Known {
+        fn process(
+            &mut self,
+            view: &ImageView,
+            out: &mut Detection,
+        ) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
+            let i = u64::from_le_bytes(view.data[..8].try_into()?);
+            let (_, h, t, q) = estimate(i);
+            out.rows.clear();
+            out.vanishing_point = Some(VanishingPoint {
+                direction: nalgebra::Vector3::x(),
+                inliers: 2,
+                residual_rad: 0.0,
+            });
+            out.heading_rad = Some(h);
+            out.tilt_rad = Some(t);
+            out.quality = q;
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn the_pipeline_publishes_estimates_frames_and_status_through_ros2() {
+        let Some(venv) = venv() else { return };
+        let d = domain(4);
+        let mut sub = Subscriber::start(
+            &venv,
+            d,
+            &[
+                "--want",
+                "heading_tilt=6",
+                "--want",
+                "orientation=6",
+                "--want",
+                "image_raw=2",
+                "--want",
+                "diagnostics=2",
+                "--timeout",
+                "40",
+            ],
+        );
+        let mut cfg = config(d);
+        cfg.image_rate_hz = 5.0;
+        let p = omnirow::ros2::node_publisher(&cfg, "paced test source")
+            .unwrap()
+            .expect("enabled");
+        let pipeline = Pipeline::start(
+            Box::new(Paced { next: 0 }),
+            vec![Box::new(Known)],
+            vec![p],
+            None,
+            PipelineOptions {
+                max_duration: Some(Duration::from_secs(45)),
+                ..PipelineOptions::default()
+            },
+        )
+        .unwrap();
+        let t0 = Instant::now();
+        while sub.done().is_none() && t0.elapsed() < Duration::from_secs(45) {
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        pipeline.request_stop();
+        let status = pipeline.join().unwrap();
+        let (code, samples) = sub.finish(Duration::from_secs(5));
+        assert_eq!(code, 0, "subscriber failed; pipeline status {status:?}");
+        let k = by_kind(&samples);
+        for m in &k["heading_tilt"] {
+            let (_, h, t, q) = estimate(frame_index(m));
+            let v: Vec<f64> = m["vector_bits"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|b| f64::from_bits(b.as_u64().unwrap()))
+                .collect();
+            assert_eq!(v, vec![h, t, q]);
+        }
+        for m in &k["orientation"] {
+            let (_, h, t, _) = estimate(frame_index(m));
+            let o: Vec<f64> = m["orientation"].as_array().unwrap().iter().map(f).collect();
+            let (x, y, z, w) = (o[0], o[1], o[2], o[3]);
+            let dy = 2.0 * (x * y - w * z);
+            let dx = 1.0 - 2.0 * (y * y + z * z);
+            assert!((dy.atan2(dx) - h).abs() < 1e-9, "heading of frame {m}");
+            let dz = 2.0 * (x * z + w * y);
+            assert!((dz.asin() - t).abs() < 1e-9, "tilt of frame {m}");
+        }
+        for m in &k["image_raw"] {
+            let i = frame_index(m);
+            let hex: String = frame_pixels(i).iter().map(|b| format!("{b:02x}")).collect();
+            assert_eq!(m["data_hex"].as_str().unwrap(), hex);
+            assert_eq!(m["encoding"], "mono8");
+        }
+        for m in &k["diagnostics"] {
+            let s = &m["status"][0];
+            assert_eq!(s["hardware_id"], "paced test source");
+            assert_eq!(s["values"]["source_state"], "streaming");
+            assert_eq!(s["values"]["estimate_status"], "ok");
+            assert_eq!(s["level"].as_u64(), Some(0));
+            let fin: u64 = s["values"]["frames_in"].as_str().unwrap().parse().unwrap();
+            assert!(fin > 0);
+        }
+    }
 }

@@ -23,9 +23,11 @@ pub struct Ros2Config {
     pub namespace: String,
     /// Node name, as `ros2 node list` shows it.
     pub node_name: String,
-    /// `header.frame_id` of every estimate and image message: the robot frame the
-    /// orientation describes (REP 105 `base_link` unless the robot's TF tree says otherwise).
+    /// `header.frame_id` of the estimate messages: the robot frame the orientation describes
+    /// (REP 105 `base_link` unless the robot's TF tree says otherwise).
     pub frame_id: String,
+    /// `header.frame_id` of `image_raw`: the camera's optical frame (the recorder's default).
+    pub image_frame_id: String,
     /// Local IP addresses whose interfaces DDS may use (multicast and advertised unicast
     /// locators). Empty: all interfaces.
     pub networks: Vec<IpAddr>,
@@ -45,6 +47,7 @@ impl Default for Ros2Config {
             namespace: "/omnirow".to_string(),
             node_name: "omnirow".to_string(),
             frame_id: "base_link".to_string(),
+            image_frame_id: "omnirow_camera".to_string(),
             networks: Vec::new(),
             qos: QosConfig::default(),
             sigma_deg_at_full_quality: 1.0,
@@ -107,6 +110,9 @@ impl Ros2Config {
         }
         if self.frame_id.is_empty() {
             return err("frame_id", "must not be empty".to_string());
+        }
+        if self.image_frame_id.is_empty() {
+            return err("image_frame_id", "must not be empty".to_string());
         }
         if self.qos.depth == 0 {
             return err("qos.depth", "must be at least 1".to_string());
@@ -209,6 +215,7 @@ mod tests {
             namespace = "/farm/robot1"
             node_name = "rows"
             frame_id = "camera_link"
+            image_frame_id = "cam_optical"
             networks = ["127.0.0.1", "::1"]
             sigma_deg_at_full_quality = 0.5
             image_rate_hz = 2.0
@@ -247,6 +254,7 @@ mod tests {
         bad(|c| c.node_name = "9lives".into(), "node_name");
         bad(|c| c.node_name = "a__b".into(), "node_name");
         bad(|c| c.frame_id = "".into(), "frame_id");
+        bad(|c| c.image_frame_id = "".into(), "image_frame_id");
         bad(|c| c.qos.depth = 0, "qos.depth");
         bad(
             |c| c.sigma_deg_at_full_quality = 0.0,

@@ -78,6 +78,7 @@ impl RowAttitude {
 #[derive(Debug, Clone)]
 pub struct MessageBuilder {
     frame_id: String,
+    image_frame_id: String,
     node_name: String,
     sigma_best_rad: f64,
 }
@@ -86,6 +87,7 @@ impl MessageBuilder {
     pub fn new(config: &Ros2Config) -> MessageBuilder {
         MessageBuilder {
             frame_id: config.frame_id.clone(),
+            image_frame_id: config.image_frame_id.clone(),
             node_name: config.node_name.clone(),
             sigma_best_rad: config.sigma_deg_at_full_quality.to_radians(),
         }
@@ -203,10 +205,14 @@ impl MessageBuilder {
         })
     }
 
-    /// `sensor_msgs/Image` of a frame (copied: the message owns its bytes).
+    /// `sensor_msgs/Image` of a frame (copied: the message owns its bytes), in the camera's
+    /// frame (`image_frame_id`).
     pub fn image(&self, view: &ImageView, capture_ns: u64) -> Result<Image, TimeRangeError> {
         Ok(Image {
-            header: self.header(capture_ns)?,
+            header: Header {
+                stamp: Time::from_nanos(capture_ns)?,
+                frame_id: self.image_frame_id.clone(),
+            },
             height: view.height,
             width: view.width,
             encoding: view.format.ros_encoding().to_string(),

@@ -17,10 +17,11 @@
 //! | `<ns>/image_raw` | `sensor_msgs/msg/Image` | `[ros2.qos]`; only if `image_rate_hz` > 0 |
 //! | `/diagnostics` | `diagnostic_msgs/msg/DiagnosticArray` | reliable, keep last 10 |
 
-use super::config::{Reliability, Ros2Config, Ros2ConfigError};
+use super::config::{Reliability, Ros2Config};
 use super::convert::{ImageThrottle, MessageBuilder};
+use super::error::Ros2Error;
 use super::input::{RosEstimate, RosStatus};
-use super::msg::{DiagnosticArray, Image, Imu, RosType, TimeRangeError, Vector3Stamped};
+use super::msg::{DiagnosticArray, Image, Imu, RosType, Vector3Stamped};
 use crate::frame::ImageView;
 use ros2_client::dds::rustdds::DomainParticipantBuilder;
 use ros2_client::qos::{Durability, History, WhenFull};
@@ -28,19 +29,6 @@ use ros2_client::{
     Context, MessageTypeName, Name, Node, NodeName, NodeOptions, Publisher, QosProfile, WriteError,
 };
 use serde::Serialize;
-
-/// Why the ROS 2 node could not be set up or a message not be sent.
-#[derive(Debug, thiserror::Error)]
-pub enum Ros2Error {
-    #[error(transparent)]
-    Config(#[from] Ros2ConfigError),
-    #[error("ROS 2: cannot create {what}: {reason}")]
-    Create { what: String, reason: String },
-    #[error("ROS 2: cannot publish on {topic}: {reason}")]
-    Write { topic: String, reason: String },
-    #[error(transparent)]
-    Stamp(#[from] TimeRangeError),
-}
 
 /// A topic this node publishes, as ROS 2 names it.
 #[derive(Debug, Clone, PartialEq, Eq)]

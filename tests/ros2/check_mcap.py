@@ -8,7 +8,8 @@ For every channel whose schema is sensor_msgs/msg/Image:
     its RIHS01 type hash equals the one rosbags computes from its Jazzy type store;
   - every message decodes as sensor_msgs/msg/Image CDR, re-encodes to the same bytes, and is a
     consistent image: a known encoding, step >= width * bytes per pixel, len(data) == step * height.
-Prints one JSON line per image (stamp, frame_id, size, encoding, sha256 of the pixels) and a
+Prints one JSON line per image (stamp, frame_id, size, encoding, sha256 of the pixels, the
+pixels in hex up to 4 KiB, else their first 64 bytes) and a
 final {"summary": ...} line. Exit 0 when every check passes and at least --min-images images
 were found, 1 otherwise (reasons on stderr), 2 on bad usage.
 
@@ -58,12 +59,40 @@ def strip_pad(b):
     return b[: len(b) - n]
 
 
+def open_reader(path, warnings):
+    """rosbags' Reader; if it cannot open the file because a non-ROS channel has a schema
+    encoding it does not know (e.g. `jsonschema`), say so and retry with that channel's schema
+    read as 'no definition', so the Image channels can still be checked."""
+    try:
+        Reader(path).open()
+        return Reader(path)
+    except KeyError as e:
+        warnings.append(
+            f"rosbags cannot open this file as it is: a channel's schema encoding {e} is not a "
+            "ROS one (KeyError in rosbags); its other channels are checked with that tolerated"
+        )
+    from rosbags.rosbag2 import storage_mcap
+    from rosbags.interfaces import MessageDefinition, MessageDefinitionFormat
+
+    strict = storage_mcap.get_msgdef
+
+    def tolerant(schema):
+        try:
+            return strict(schema)
+        except KeyError:
+            return MessageDefinition(MessageDefinitionFormat.NONE, "")
+
+    storage_mcap.get_msgdef = tolerant
+    return Reader(path)
+
+
 def check(path, min_images):
     jazzy = get_typestore(Stores.ROS2_JAZZY)
     want_hash = jazzy.hash_rihs01(IMAGE)
     errors = []
+    warnings = []
     images = 0
-    with Reader(path) as reader:
+    with open_reader(path, warnings) as reader:
         conns = [c for c in reader.connections if c.msgtype == IMAGE]
         for c in conns:
             enc = getattr(c.ext, "serialization_format", None)
@@ -112,10 +141,16 @@ def check(path, min_images):
                 "is_bigendian": m.is_bigendian,
                 "data_len": len(m.data),
                 "data_sha256": hashlib.sha256(bytes(m.data)).hexdigest(),
+                "data_head_hex": bytes(m.data[:64]).hex(),
+                **({"data_hex": bytes(m.data).hex()} if len(m.data) <= 4096 else {}),
             }), flush=True)
     if images < min_images:
         errors.append(f"{images} image(s), expected at least {min_images}")
-    print(json.dumps({"summary": {"images": images, "errors": errors, "rihs01": want_hash}}))
+    print(json.dumps({"summary": {
+        "images": images, "errors": errors, "warnings": warnings, "rihs01": want_hash,
+    }}))
+    for w in warnings:
+        print(f"check_mcap.py: {path}: warning: {w}", file=sys.stderr)
     for e in errors:
         print(f"check_mcap.py: {path}: {e}", file=sys.stderr)
     return 0 if not errors else 1
