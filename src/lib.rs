@@ -18,6 +18,7 @@ pub mod notify;
 pub mod pipeline;
 pub mod publish;
 pub mod record;
+pub mod ros2;
 pub mod source;
 pub mod sphere;
 pub mod synth;

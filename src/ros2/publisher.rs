@@ -1,0 +1,340 @@
+//! The ROS 2 node: a DDS participant (RustDDS through `ros2-client`), one node, and its
+//! publishers.
+//!
+//! Owns [`Ros2Publisher`]: built once from a [`Ros2Config`], then called from the node's
+//! publisher thread for every estimate, once a second for the status, and for frames (sent
+//! on `image_raw` only at the configured rate). Publishing never blocks: the estimate topics
+//! are best effort by default, and a reliable writer whose send window is full drops the
+//! sample (counted in [`PublishCounts::would_block`]) rather than stall the pipeline.
+//!
+//! Topics (namespace `/omnirow` by default; they live in the node's namespace, so
+//! `ros2 topic echo /omnirow/orientation` finds them):
+//!
+//! | topic | type | QoS |
+//! |---|---|---|
+//! | `<ns>/orientation` | `sensor_msgs/msg/Imu` | `[ros2.qos]`, sensor data by default |
+//! | `<ns>/heading_tilt` | `geometry_msgs/msg/Vector3Stamped` | `[ros2.qos]` |
+//! | `<ns>/image_raw` | `sensor_msgs/msg/Image` | `[ros2.qos]`; only if `image_rate_hz` > 0 |
+//! | `/diagnostics` | `diagnostic_msgs/msg/DiagnosticArray` | reliable, keep last 10 |
+
+use super::config::{Reliability, Ros2Config};
+use super::convert::{ImageThrottle, MessageBuilder};
+use super::error::Ros2Error;
+use super::input::{RosEstimate, RosStatus};
+use super::msg::{DiagnosticArray, Image, Imu, RosType, Vector3Stamped};
+use crate::frame::ImageView;
+use ros2_client::dds::rustdds::DomainParticipantBuilder;
+use ros2_client::qos::{Durability, History, WhenFull};
+use ros2_client::{
+    Context, MessageTypeName, Name, Node, NodeName, NodeOptions, Publisher, QosProfile, WriteError,
+};
+use serde::Serialize;
+
+/// A topic this node publishes, as ROS 2 names it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct TopicInfo {
+    /// ROS name, e.g. `/omnirow/orientation`.
+    pub name: String,
+    /// DDS topic name, e.g. `rt/omnirow/orientation`.
+    pub dds_name: String,
+    /// ROS type, e.g. `sensor_msgs/msg/Imu`.
+    pub ros_type: String,
+    /// DDS type, e.g. `sensor_msgs::msg::dds_::Imu_`.
+    pub dds_type: String,
+}
+
+/// Messages sent and dropped since the publisher was created.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct PublishCounts {
+    pub orientation: u64,
+    pub heading_tilt: u64,
+    pub diagnostics: u64,
+    pub images: u64,
+    /// Samples a reliable writer refused because its send window was full.
+    pub would_block: u64,
+}
+
+/// A typed writer and the topic it writes.
+struct Writer<M: Serialize> {
+    publisher: Publisher<M>,
+    topic: TopicInfo,
+}
+
+/// The ROS 2 node omnirow runs; see the module doc for its topics.
+pub struct Ros2Publisher {
+    // Field order is drop order: writers first, then the node, then the participant.
+    orientation: Writer<Imu>,
+    heading_tilt: Writer<Vector3Stamped>,
+    diagnostics: Writer<DiagnosticArray>,
+    image: Option<Writer<Image>>,
+    builder: MessageBuilder,
+    throttle: ImageThrottle,
+    counts: PublishCounts,
+    node: Node,
+    context: Context,
+}
+
+impl std::fmt::Debug for Ros2Publisher {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Ros2Publisher")
+            .field("node", &self.node.fully_qualified_name())
+            .field("domain_id", &self.context.domain_id())
+            .field("counts", &self.counts)
+            .finish()
+    }
+}
+
+fn create_err(what: impl Into<String>) -> impl FnOnce(String) -> Ros2Error {
+    let what = what.into();
+    move |reason| Ros2Error::Create { what, reason }
+}
+
+impl Ros2Publisher {
+    /// Joins the DDS domain, creates the node and its publishers. The node announces itself
+    /// on `ros_discovery_info` (as every rmw does), so `ros2 node list` shows it.
+    pub fn new(config: &Ros2Config) -> Result<Ros2Publisher, Ros2Error> {
+        config.validate()?;
+        let domain = config.resolved_domain_id()?;
+        let mut dpb = DomainParticipantBuilder::new(domain);
+        if !config.networks.is_empty() {
+            dpb = dpb.with_only_networks(config.networks.iter().copied());
+        }
+        let participant = dpb
+            .build()
+            .map_err(|e| e.to_string())
+            .map_err(create_err(format!("DDS participant in domain {domain}")))?;
+        let context = Context::from_domain_participant(participant)
+            .map_err(|e| e.to_string())
+            .map_err(create_err("ROS 2 context"))?;
+        let node_name = NodeName::new(&config.namespace, &config.node_name)
+            .map_err(|e| format!("{e:?}"))
+            .map_err(create_err(format!(
+                "node {:?} in namespace {:?}",
+                config.node_name, config.namespace
+            )))?;
+        let mut node = context
+            .new_node(
+                node_name,
+                NodeOptions::new()
+                    .enable_rosout(false)
+                    .start_parameter_services(false),
+            )
+            .map_err(|e| format!("{e:?}"))
+            .map_err(create_err("ROS 2 node"))?;
+
+        let frame_qos = frame_qos(config);
+        // rclcpp's default QoS, which diagnostic_aggregator and `ros2 topic echo` request.
+        let diagnostics_qos = QosProfile::publisher_default()
+            .reliability_reliable(WhenFull::Fail)
+            .durability(Durability::Volatile)
+            .history(History::KeepLast { depth: 10 });
+
+        let ns = config.namespace.as_str();
+        let orientation = writer::<Imu>(&mut node, ns, "orientation", &frame_qos)?;
+        let heading_tilt = writer::<Vector3Stamped>(&mut node, ns, "heading_tilt", &frame_qos)?;
+        let diagnostics =
+            writer::<DiagnosticArray>(&mut node, "/", "diagnostics", &diagnostics_qos)?;
+        let image = if config.image_rate_hz > 0.0 {
+            Some(writer::<Image>(&mut node, ns, "image_raw", &frame_qos)?)
+        } else {
+            None
+        };
+        tracing::info!(
+            node = %node.fully_qualified_name(),
+            domain,
+            networks = ?config.networks,
+            "ROS 2 node up"
+        );
+        Ok(Ros2Publisher {
+            orientation,
+            heading_tilt,
+            diagnostics,
+            image,
+            builder: MessageBuilder::new(config),
+            throttle: ImageThrottle::new(config.image_rate_hz),
+            counts: PublishCounts::default(),
+            node,
+            context,
+        })
+    }
+
+    /// The node's fully qualified name, e.g. `/omnirow/omnirow`.
+    pub fn node_name(&self) -> String {
+        self.node.fully_qualified_name()
+    }
+
+    /// The DDS domain the node joined.
+    pub fn domain_id(&self) -> u16 {
+        self.context.domain_id()
+    }
+
+    /// The topics this node publishes.
+    pub fn topics(&self) -> Vec<TopicInfo> {
+        let mut t = vec![
+            self.orientation.topic.clone(),
+            self.heading_tilt.topic.clone(),
+            self.diagnostics.topic.clone(),
+        ];
+        if let Some(i) = &self.image {
+            t.push(i.topic.clone());
+        }
+        t
+    }
+
+    /// Messages sent and dropped so far.
+    pub fn counts(&self) -> PublishCounts {
+        self.counts
+    }
+
+    /// Publishes one frame's estimate on `orientation` and `heading_tilt`. Returns false,
+    /// publishing nothing, when the estimate has no heading or no tilt.
+    pub fn publish_estimate(&mut self, e: &RosEstimate) -> Result<bool, Ros2Error> {
+        let (Some(imu), Some(ht)) = (self.builder.imu(e)?, self.builder.heading_tilt(e)?) else {
+            return Ok(false);
+        };
+        if send(&self.orientation, imu, &mut self.counts.would_block)? {
+            self.counts.orientation += 1;
+        }
+        if send(&self.heading_tilt, ht, &mut self.counts.would_block)? {
+            self.counts.heading_tilt += 1;
+        }
+        Ok(true)
+    }
+
+    /// Publishes the status summary on `/diagnostics`, stamped with the wall clock. The node
+    /// calls it once a second.
+    pub fn publish_status(&mut self, s: &RosStatus) -> Result<(), Ros2Error> {
+        let now_ns = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map(|d| d.as_nanos() as u64)
+            .unwrap_or(0);
+        self.publish_status_at(s, now_ns)
+    }
+
+    /// As [`Self::publish_status`], stamped `now_ns` (nanoseconds since the UNIX epoch).
+    pub fn publish_status_at(&mut self, s: &RosStatus, now_ns: u64) -> Result<(), Ros2Error> {
+        let d = self.builder.diagnostics(s, now_ns)?;
+        if send(&self.diagnostics, d, &mut self.counts.would_block)? {
+            self.counts.diagnostics += 1;
+        }
+        Ok(())
+    }
+
+    /// Offers a frame for `image_raw`: sent (copied) when images are enabled and one is due
+    /// at `image_rate_hz` of capture time. Returns whether it was sent.
+    pub fn publish_frame(&mut self, view: &ImageView, capture_ns: u64) -> Result<bool, Ros2Error> {
+        let Some(w) = &self.image else {
+            return Ok(false);
+        };
+        if !self.throttle.due(capture_ns) {
+            return Ok(false);
+        }
+        let msg = self.builder.image(view, capture_ns)?;
+        let sent = send(w, msg, &mut self.counts.would_block)?;
+        if sent {
+            self.counts.images += 1;
+        }
+        Ok(sent)
+    }
+}
+
+/// The QoS of the per-frame topics from `[ros2.qos]`.
+fn frame_qos(config: &Ros2Config) -> QosProfile {
+    let base = QosProfile::subscription_default()
+        .durability(Durability::Volatile)
+        .history(History::KeepLast {
+            depth: config.qos.depth as usize,
+        });
+    match config.qos.reliability {
+        Reliability::BestEffort => base.reliability_best_effort(),
+        Reliability::Reliable => base.reliability_reliable(WhenFull::Fail),
+    }
+}
+
+fn writer<M: RosType + Serialize>(
+    node: &mut Node,
+    namespace: &str,
+    base: &str,
+    qos: &QosProfile,
+) -> Result<Writer<M>, Ros2Error> {
+    let full = if namespace == "/" {
+        format!("/{base}")
+    } else {
+        format!("{namespace}/{base}")
+    };
+    let name = Name::new(namespace, base)
+        .map_err(|e| format!("{e:?}"))
+        .map_err(create_err(format!("topic name {full}")))?;
+    let topic = node
+        .create_topic(&name, MessageTypeName::new(M::PACKAGE, M::NAME), qos)
+        .map_err(|e| e.to_string())
+        .map_err(create_err(format!("topic {full}")))?;
+    let publisher = node
+        .create_publisher::<M>(&topic, None)
+        .map_err(|e| e.to_string())
+        .map_err(create_err(format!("publisher on {full}")))?;
+    Ok(Writer {
+        publisher,
+        topic: TopicInfo {
+            dds_name: format!("rt{full}"),
+            name: full,
+            ros_type: M::ros_name(),
+            dds_type: M::dds_name(),
+        },
+    })
+}
+
+/// Writes one sample. A full reliable send window drops it (counted, logged at debug),
+/// anything else is an error naming the topic.
+fn send<M: Serialize>(w: &Writer<M>, msg: M, would_block: &mut u64) -> Result<bool, Ros2Error> {
+    match w.publisher.publish(msg) {
+        Ok(()) => Ok(true),
+        Err(WriteError::WouldBlock { .. }) => {
+            *would_block += 1;
+            tracing::debug!(topic = %w.topic.name, "send window full: sample dropped");
+            Ok(false)
+        }
+        Err(e) => Err(Ros2Error::Write {
+            topic: w.topic.name.clone(),
+            reason: e.to_string(),
+        }),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn assert_send<T: Send>() {}
+
+    #[test]
+    fn the_publisher_can_move_to_the_publisher_thread() {
+        assert_send::<Ros2Publisher>();
+    }
+
+    #[test]
+    fn frame_qos_follows_the_config() {
+        let mut c = Ros2Config::default();
+        let q = frame_qos(&c);
+        assert_eq!(q.reliability, ros2_client::qos::Reliability::BestEffort);
+        assert_eq!(q.history, History::KeepLast { depth: 5 });
+        c.qos.reliability = Reliability::Reliable;
+        c.qos.depth = 2;
+        let q = frame_qos(&c);
+        assert!(matches!(
+            q.reliability,
+            ros2_client::qos::Reliability::Reliable { .. }
+        ));
+        assert_eq!(q.history, History::KeepLast { depth: 2 });
+    }
+
+    #[test]
+    fn a_bad_config_fails_before_touching_the_network() {
+        let c = Ros2Config {
+            node_name: "bad name".into(),
+            ..Ros2Config::default()
+        };
+        let e = Ros2Publisher::new(&c).unwrap_err();
+        assert!(e.to_string().contains("ros2.node_name"), "{e}");
+    }
+}
