@@ -304,10 +304,15 @@ pub fn run(args: RunArgs, record_to: Option<PathBuf>) -> anyhow::Result<ExitCode
         Some(addr) => {
             let overlay_cal = cal.clone();
             let overlay: OverlayFn = Arc::new(move |l: &Latest| overlay_png(&overlay_cal, l));
-            Some(
-                HttpServer::start(addr, shared.clone(), overlay)
-                    .with_context(|| format!("HTTP endpoint on {addr}"))?,
-            )
+            // The estimates matter more than the endpoint: a busy port is a loud warning,
+            // not a node that will not start.
+            match HttpServer::start(addr, shared.clone(), overlay) {
+                Ok(h) => Some(h),
+                Err(e) => {
+                    tracing::error!(%addr, "HTTP endpoint not started: {e} (http.listen)");
+                    None
+                }
+            }
         }
         None => None,
     };

@@ -501,6 +501,73 @@ mod tests {
         assert_eq!(utc_stamp(951_782_400 * 1_000_000_000), "20000229T000000Z");
     }
 
+    fn frame(seq: u64) -> Frame {
+        Frame {
+            seq,
+            capture_ns: 1_000 + seq,
+            receive_ns: 2_000 + seq,
+            width: 64,
+            height: 32,
+            format: crate::frame::PixelFormat::Mono8,
+            data: vec![seq as u8; 64 * 32],
+            truth: None,
+        }
+    }
+
+    fn dir(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("omnirow-rec-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        d
+    }
+
+    #[test]
+    fn rotates_by_size_into_complete_files() {
+        let d = dir("rotate");
+        let mut r = Recorder::new(RecordOptions {
+            dir: d.clone(),
+            rotate_bytes: 5 * 64 * 32,
+            reserve_bytes: 0,
+            calibration_toml: Some("not checked here".into()),
+            ..RecordOptions::default()
+        })
+        .unwrap();
+        for i in 0..12 {
+            r.write_frame(&frame(i)).unwrap();
+        }
+        r.finish().unwrap();
+        assert!(r.files().len() >= 3, "{:?}", r.files());
+        let mut seen = 0;
+        for f in r.files() {
+            let bytes = std::fs::read(f).unwrap();
+            let summary = mcap::Summary::read(&bytes).unwrap().expect("summary");
+            assert_eq!(summary.attachment_indexes.len(), 1, "calibration attached");
+            for m in mcap::MessageStream::new(&bytes).unwrap() {
+                let m = m.unwrap();
+                let img = image_msg::decode_ros2_image(&m.data).unwrap();
+                assert_eq!(img.data[0], seen as u8, "frames in order, none lost");
+                seen += 1;
+            }
+        }
+        assert_eq!(seen, 12);
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    #[test]
+    fn disk_reserve_stops_recording_without_error() {
+        let d = dir("reserve");
+        let mut r = Recorder::new(RecordOptions {
+            dir: d.clone(),
+            reserve_bytes: u64::MAX / 2,
+            ..RecordOptions::default()
+        })
+        .unwrap();
+        assert_eq!(r.state(), &RecordState::StoppedDiskFull);
+        r.write_frame(&frame(0)).unwrap();
+        assert_eq!(r.frames_written(), 0);
+        assert!(r.files().is_empty());
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
     #[test]
     fn free_bytes_of_tmp() {
         assert!(free_bytes(&std::env::temp_dir()).unwrap() > 0);
