@@ -7,7 +7,7 @@
 //! `cargo test --release --test detect_accuracy -- --ignored --nocapture`.
 
 use omnirow::camera::{ideal_fisheye, ideal_pal, Calibration};
-use omnirow::detect::{Detection, Detector, DetectorOptions};
+use omnirow::detect::{Detection, Detector, DetectorOptions, Method};
 use omnirow::frame::ImageView;
 use omnirow::synth::{random_scene, Protocol, Renderer, Scene, Style};
 use std::path::Path;
@@ -65,7 +65,13 @@ fn summarise(outs: &[Outcome]) -> Summary {
 /// Renders `count` Table I scenes (seeds `first..`) through `cal` in `style` and detects.
 fn run_protocol(cal: &Calibration, style: Style, first: u64, count: u64) -> Vec<Outcome> {
     let mut renderer = Renderer::new(cal).unwrap();
-    let mut det = Detector::new(cal, DetectorOptions::default()).unwrap();
+    // These guards are the Hough method's (paper Table I, Hough row); the combined method,
+    // now the default, is guarded in tests/edge_synth.rs.
+    let opts = DetectorOptions {
+        method: Method::Hough,
+        ..DetectorOptions::default()
+    };
+    let mut det = Detector::new(cal, opts).unwrap();
     let mut out = Detection::default();
     let mut buf = Vec::new();
     (first..first + count)

@@ -4,8 +4,8 @@
 //! Each subcommand returns an exit code (`ExitCode`) or an error that `main` reports.
 
 mod calib;
-mod config;
 mod cameras;
+mod config;
 pub mod detect;
 mod eval;
 mod run;
