@@ -162,7 +162,10 @@ pub struct Config {
     pub multicast_interface: Ipv4Addr,
     pub stdout: StdoutMode,
     pub http: Option<SocketAddr>,
+    /// Recording, when `[record] enabled = true`.
     pub record: Option<RecordOptions>,
+    /// The `[record]` settings whether enabled or not (what `omnirow record` uses).
+    pub record_options: RecordOptions,
     pub log_format: LogFormat,
     pub log_level: String,
     /// The detector's options (`[detector]`, see `omnirow detect`).
@@ -281,6 +284,7 @@ struct RawRecord {
     rotate_s: S<f64>,
     reserve_mb: S<i64>,
     sync_interval_ms: S<i64>,
+    json_channels: S<crate::record::JsonChannels>,
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -646,7 +650,8 @@ fn validate(raw: RawConfig, c: &mut Check) -> Config {
         None
     };
 
-    let record = if c.get(&rec.enabled, false) {
+    // Checked whether or not [record] is enabled: `omnirow record` uses these settings too.
+    let record_options = {
         let sync_ms = c.range(
             "record.sync_interval_ms",
             &rec.sync_interval_ms,
@@ -664,7 +669,7 @@ fn validate(raw: RawConfig, c: &mut Check) -> Config {
                 );
             }
         }
-        Some(RecordOptions {
+        RecordOptions {
             dir: PathBuf::from(c.get(&rec.dir, "/var/lib/omnirow".to_string())),
             prefix,
             rotate_bytes: c.range("record.rotate_mb", &rec.rotate_mb, 4096, 0, 1 << 30) as u64
@@ -682,10 +687,10 @@ fn validate(raw: RawConfig, c: &mut Check) -> Config {
             frames: c.get(&rec.frames, true),
             frame_id: c.get(&cam.frame_id, "omnirow_camera".to_string()),
             calibration_toml: None,
-        })
-    } else {
-        None
+            json_channels: c.get(&rec.json_channels, crate::record::JsonChannels::Json),
+        }
     };
+    let record = c.get(&rec.enabled, false).then(|| record_options.clone());
 
     let log_level = c.get(&log.level, "info".to_string());
     if let Some(s) = &log.level {
@@ -745,6 +750,7 @@ fn validate(raw: RawConfig, c: &mut Check) -> Config {
         stdout: c.get(&publ.stdout, StdoutMode::Auto),
         http: http_addr,
         record,
+        record_options,
         log_format: c.get(&log.format, LogFormat::Human),
         log_level,
         detector,

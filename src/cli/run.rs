@@ -220,7 +220,7 @@ impl Processor for DetectorWorker {
 pub fn run(args: RunArgs, record_to: Option<PathBuf>) -> anyhow::Result<ExitCode> {
     let mut cfg = configure(&args)?;
     if let Some(dir) = record_to {
-        let mut rec = cfg.record.clone().unwrap_or_default();
+        let mut rec = cfg.record_options.clone();
         rec.dir = dir;
         rec.frame_id = cfg.frame_id.clone();
         cfg.record = Some(rec);
