@@ -7,8 +7,10 @@
 //! default that `config/omnirow.toml` shows.
 
 use crate::detect::DetectorOptions;
+use crate::gige::GigeConfig;
 use crate::pipeline::PipelineOptions;
 use crate::record::RecordOptions;
+use crate::ros2::Ros2Config;
 use crate::source::Rate;
 use serde::Deserialize;
 use std::fmt;
@@ -60,6 +62,9 @@ impl std::error::Error for ConfigError {}
 pub enum SourceConfig {
     Synthetic(SyntheticConfig),
     Replay(ReplayConfig),
+    /// A GigE Vision camera through Aravis, configured by `[gige]` (needs the `camera`
+    /// feature at run time; the configuration is checked on every build).
+    Camera(GigeConfig),
 }
 
 /// The synthetic drive.
@@ -131,6 +136,7 @@ pub enum LogFormat {
 enum SourceKind {
     Synthetic,
     Replay,
+    Camera,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
@@ -161,6 +167,8 @@ pub struct Config {
     pub log_level: String,
     /// The detector's options (`[detector]`, see `omnirow detect`).
     pub detector: DetectorOptions,
+    /// ROS 2 publishing (`[ros2]`, docs/ros2.md); off unless `enabled = true`.
+    pub ros2: Ros2Config,
 }
 
 impl Default for Config {
@@ -185,6 +193,8 @@ struct RawConfig {
     record: Option<RawRecord>,
     log: Option<RawLog>,
     detector: Option<DetectorOptions>,
+    gige: Option<GigeConfig>,
+    ros2: Option<Ros2Config>,
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -340,6 +350,19 @@ impl Check<'_> {
             }
         }
     }
+}
+
+/// The 1-based line of the first `[name]` or `[name.…]` header (0 when absent): nested tables
+/// parsed as whole structs carry no positions, so their problems point at their header.
+fn header_line(text: &str, name: &str) -> usize {
+    text.lines()
+        .position(|l| {
+            let t = l.trim_start();
+            t.strip_prefix('[')
+                .and_then(|r| r.trim_start().strip_prefix(name))
+                .is_some_and(|r| r.trim_start().starts_with([']', '.']))
+        })
+        .map_or(0, |i| i + 1)
 }
 
 fn line_of(text: &str, offset: usize) -> usize {
@@ -534,7 +557,25 @@ fn validate(raw: RawConfig, c: &mut Check) -> Config {
                 fps: c.range("source.replay.fps", &rep.fps, 15.0, 0.01, 1000.0),
             })
         }
+        SourceKind::Camera => SourceConfig::Camera(raw.gige.clone().unwrap_or_default()),
     };
+    if let Some(g) = &raw.gige {
+        if let Err(e) = g.validate() {
+            c.problems.push(Problem {
+                line: header_line(c.text, "gige"),
+                key: format!("gige.{}", e.key),
+                message: e.problem,
+            });
+        }
+    }
+    let ros2 = raw.ros2.clone().unwrap_or_default();
+    if let Err(e) = ros2.validate() {
+        c.problems.push(Problem {
+            line: header_line(c.text, "ros2"),
+            key: format!("ros2.{}", e.key),
+            message: e.problem,
+        });
+    }
 
     let calibration = match &cam.calibration {
         None => CalibrationChoice::Auto,
@@ -663,12 +704,7 @@ fn validate(raw: RawConfig, c: &mut Check) -> Config {
     let detector = match &raw.detector {
         None => DetectorOptions::default(),
         Some(o) => {
-            // Nested tables cannot carry positions: point at the first [detector…] header.
-            let line = c
-                .text
-                .lines()
-                .position(|l| l.trim_start().starts_with("[detector"))
-                .map_or(0, |i| i + 1);
+            let line = header_line(c.text, "detector");
             let mut bad = |key: &str, message: String| {
                 c.problems.push(Problem {
                     line,
@@ -712,6 +748,7 @@ fn validate(raw: RawConfig, c: &mut Check) -> Config {
         log_format: c.get(&log.format, LogFormat::Human),
         log_level,
         detector,
+        ros2,
     }
 }
 
@@ -779,7 +816,7 @@ mod tests {
             (e.problems[0].line, e.problems[0].key.as_str()),
             (2, "source.kind")
         );
-        let e = err("[source]\nkind = \"camera\"\n");
+        let e = err("[source]\nkind = \"kamera\"\n");
         assert!(e.problems[0].message.contains("unknown variant"), "{e}");
         let e = err("[detector]\nmax_tilt_deg = 99.0\n");
         assert_eq!(
@@ -797,5 +834,61 @@ mod tests {
         );
         let e = err("[pipeline]\nmin_quality = nan\n");
         assert_eq!(e.problems[0].key, "pipeline.min_quality");
+    }
+
+    #[test]
+    fn camera_source_takes_the_gige_table() {
+        let cfg = Config::parse(
+            "[source]\nkind = \"camera\"\n[gige]\ncamera = \"02-2623A\"\npixel_format = \"Mono8\"\n[gige.stream]\npacket_socket = false\n",
+            "t.toml",
+        )
+        .unwrap();
+        let SourceConfig::Camera(g) = cfg.source else {
+            panic!("not the camera: {:?}", cfg.source)
+        };
+        assert_eq!(g.camera.as_deref(), Some("02-2623A"));
+        assert_eq!(g.pixel_format, crate::gige::GigePixelFormat::Mono8);
+        assert!(!g.stream.packet_socket);
+        // Without [gige], the camera's defaults (first camera found, BayerRG8).
+        let cfg = Config::parse("[source]\nkind = \"camera\"\n", "t.toml").unwrap();
+        assert_eq!(cfg.source, SourceConfig::Camera(GigeConfig::default()));
+    }
+
+    #[test]
+    fn gige_and_ros2_problems_name_key_and_line() {
+        let e = err("[source]\nkind = \"camera\"\n\n[gige]\nbuffers = 1\n");
+        assert_eq!(
+            (e.problems[0].line, e.problems[0].key.as_str()),
+            (4, "gige.buffers"),
+            "{e}"
+        );
+        let e = err("[gige.stream]\npacket_sise = 9000\n");
+        assert_eq!(
+            (e.problems[0].line, e.problems[0].key.as_str()),
+            (2, "gige.stream.packet_sise"),
+            "{e}"
+        );
+        let e = err("[log]\nlevel = \"info\"\n[ros2]\nenabled = true\nnamespace = \"omnirow\"\n");
+        assert_eq!(
+            (e.problems[0].line, e.problems[0].key.as_str()),
+            (3, "ros2.namespace"),
+            "{e}"
+        );
+        let e = err("[ros2]\ndomain = 3\n");
+        assert_eq!(
+            (e.problems[0].line, e.problems[0].key.as_str()),
+            (2, "ros2.domain"),
+            "{e}"
+        );
+        let cfg = Config::parse("[ros2]\nenabled = true\ndomain_id = 7\n", "t.toml").unwrap();
+        assert!(cfg.ros2.enabled);
+        assert_eq!(cfg.ros2.domain_id, Some(7));
+    }
+
+    #[test]
+    fn header_line_matches_whole_table_names() {
+        let t = "[gigex]\na = 1\n[ gige . stream ]\n[gige]\n";
+        assert_eq!(header_line(t, "gige"), 3);
+        assert_eq!(header_line(t, "ros2"), 0);
     }
 }

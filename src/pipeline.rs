@@ -19,6 +19,7 @@
 use crate::detect::Detection;
 use crate::estimate::{Estimate, Status};
 use crate::frame::{now_ns, Frame, ImageView};
+use crate::gige::Recycler;
 use crate::publish::Publisher;
 use crate::record::{RecordState, Recorder};
 use crate::source::{Poll, Source, SourceState};
@@ -314,18 +315,51 @@ fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
 
 /// Sends `item`, dropping the oldest queued items while the channel is full. Returns how
 /// many were dropped.
-pub fn send_drop_oldest<T>(tx: &Sender<T>, rx: &Receiver<T>, mut item: T) -> u64 {
+pub fn send_drop_oldest<T>(tx: &Sender<T>, rx: &Receiver<T>, item: T) -> u64 {
+    send_drop_oldest_with(tx, rx, item, drop)
+}
+
+/// [`send_drop_oldest`], handing each dropped item to `on_drop` (e.g. to recycle its buffer).
+pub fn send_drop_oldest_with<T>(
+    tx: &Sender<T>,
+    rx: &Receiver<T>,
+    mut item: T,
+    mut on_drop: impl FnMut(T),
+) -> u64 {
     let mut dropped = 0;
     loop {
         match tx.try_send(item) {
             Ok(()) => return dropped,
             Err(TrySendError::Full(back)) => {
                 item = back;
-                if rx.try_recv().is_ok() {
+                if let Ok(old) = rx.try_recv() {
                     dropped += 1;
+                    on_drop(old);
                 }
             }
             Err(TrySendError::Disconnected(_)) => return dropped,
+        }
+    }
+}
+
+/// Gives a frame's pixel buffer back to its source (the camera's pool) when the pipeline held
+/// the last reference; without a recycler, or while others still hold the frame, it just
+/// drops the reference.
+#[derive(Clone, Default)]
+struct Release(Option<Recycler>);
+
+impl Release {
+    fn frame(&self, f: Arc<Frame>) {
+        if let Some(r) = &self.0 {
+            if let Ok(f) = Arc::try_unwrap(f) {
+                r.recycle(f.data);
+            }
+        }
+    }
+
+    fn record_item(&self, item: RecordItem) {
+        if let RecordItem::Frame(f) = item {
+            self.frame(f);
         }
     }
 }
@@ -385,6 +419,7 @@ impl Pipeline {
             ));
         }
         let shared = Arc::new(Shared::new());
+        let release = Release(source.recycler());
         let mut threads = Vec::new();
         let (frame_tx, frame_rx) = bounded::<Arc<Frame>>(opts.frame_queue);
         let (done_tx, done_rx) = bounded::<Done>(opts.estimate_queue);
@@ -401,6 +436,7 @@ impl Pipeline {
         if let Some(mut rec) = recorder {
             let sh = shared.clone();
             let rx = rec_rx.clone();
+            let release = release.clone();
             let id = sh.register("recorder");
             *lock(&sh.recording) = record_state_text(rec.state());
             threads.push((
@@ -423,6 +459,7 @@ impl Pipeline {
                                 tracing::error!("recording stopped: {e}; detection goes on");
                                 rec.fail(e.to_string());
                             }
+                            release.record_item(item);
                             sh.recorded_frames
                                 .store(rec.frames_written(), Ordering::Relaxed);
                             *lock(&sh.recording) = record_state_text(rec.state());
@@ -443,6 +480,7 @@ impl Pipeline {
             let (tx, rx) = (frame_tx, frame_rx.clone());
             let (rtx, rrx) = (rec_tx.clone(), rec_rx.clone());
             let opts = opts.clone();
+            let release = release.clone();
             let id = sh.register("source");
             tracing::info!("source: {}", source.describe());
             threads.push((
@@ -465,21 +503,26 @@ impl Pipeline {
                             *lock(&sh.source_state) = source.state();
                             match polled {
                                 Ok(Poll::Frame(mut f)) => {
-                                    f.receive_ns = now_ns();
+                                    // A camera stamps the buffer's arrival itself.
+                                    if f.receive_ns == 0 {
+                                        f.receive_ns = now_ns();
+                                    }
                                     n += 1;
                                     sh.frames_in.fetch_add(1, Ordering::Relaxed);
                                     let f = Arc::new(f);
                                     if recording {
                                         let item = RecordItem::Frame(f.clone());
                                         let d = if realtime {
-                                            send_drop_oldest(&rtx, &rrx, item)
+                                            send_drop_oldest_with(&rtx, &rrx, item, |i| {
+                                                release.record_item(i)
+                                            })
                                         } else {
                                             send_waiting(&rtx, item, &sh.stop)
                                         };
                                         sh.record_dropped.fetch_add(d, Ordering::Relaxed);
                                     }
                                     let d = if realtime {
-                                        send_drop_oldest(&tx, &rx, f)
+                                        send_drop_oldest_with(&tx, &rx, f, |f| release.frame(f))
                                     } else {
                                         send_waiting(&tx, f, &sh.stop)
                                     };
@@ -589,6 +632,7 @@ impl Pipeline {
             let sh = shared.clone();
             let rtx = rec_tx;
             let rrx = rec_rx;
+            let release = release.clone();
             let id = sh.register("publisher");
             let status_interval = opts.status_interval;
             let max_waiting = opts.estimate_queue + 2 * n_workers + 2;
@@ -655,11 +699,14 @@ impl Pipeline {
                                     );
                                     sh.record_dropped.fetch_add(d, Ordering::Relaxed);
                                 }
-                                *lock(&sh.latest) = Some(Latest {
+                                let previous = lock(&sh.latest).replace(Latest {
                                     frame,
                                     detection,
                                     estimate,
                                 });
+                                if let Some(p) = previous {
+                                    release.frame(p.frame);
+                                }
                             }
                             if sh.source_state() == SourceState::Lost
                                 && last_lost.map_or(true, |t| t.elapsed() >= Duration::from_secs(1))
@@ -891,6 +938,89 @@ mod tests {
             assert_eq!(e.rows[0].support, (i + 1) as u32);
             assert!(e.latency_ms >= 0.0);
         }
+    }
+
+    /// Frames from a buffer pool, as the camera delivers them; the source stamps receive_ns.
+    struct Pooled {
+        pool: crate::gige::FramePool,
+        allocations: Arc<AtomicU64>,
+        n: u64,
+        next: u64,
+    }
+
+    impl Source for Pooled {
+        fn describe(&self) -> String {
+            "pooled".into()
+        }
+        fn poll(&mut self, _t: Duration) -> Result<Poll, SourceError> {
+            if self.next == self.n {
+                return Ok(Poll::End);
+            }
+            self.next += 1;
+            let (mut data, taken) = self.pool.take(8);
+            if taken == crate::gige::Taken::Allocated {
+                self.allocations.fetch_add(1, Ordering::Relaxed);
+            }
+            data.fill(self.next as u8);
+            // Paced a little, as a camera is, so frames are not all in flight at once.
+            std::thread::sleep(Duration::from_micros(300));
+            Ok(Poll::Frame(Frame {
+                seq: self.next - 1,
+                capture_ns: 1_000 + self.next,
+                receive_ns: 7_000 + self.next,
+                width: 4,
+                height: 2,
+                format: PixelFormat::Mono8,
+                data,
+                truth: None,
+            }))
+        }
+        fn state(&self) -> SourceState {
+            SourceState::Streaming
+        }
+        fn recycler(&self) -> Option<Recycler> {
+            Some(self.pool.recycler())
+        }
+    }
+
+    #[test]
+    fn frame_buffers_go_back_to_the_source_and_its_receive_time_is_kept() {
+        let allocations = Arc::new(AtomicU64::new(0));
+        let got = Arc::new(Mutex::new(Vec::new()));
+        let p = Pipeline::start(
+            Box::new(Pooled {
+                pool: crate::gige::FramePool::new(16),
+                allocations: allocations.clone(),
+                n: 300,
+                next: 0,
+            }),
+            vec![
+                Box::new(Slow {
+                    delay: |_| Duration::from_micros(500),
+                }),
+                Box::new(Slow {
+                    delay: |_| Duration::from_micros(500),
+                }),
+            ],
+            vec![Box::new(Collect(got.clone()))],
+            None,
+            PipelineOptions::default(),
+        )
+        .unwrap();
+        let st = p.join().unwrap();
+        let out = got.lock().unwrap().clone();
+        assert_eq!(st.frames_in, 300);
+        let a = allocations.load(Ordering::Relaxed);
+        // In flight at most: the frame queue, one per worker, the estimate queue and the
+        // latest frame; everything else must come back to the pool.
+        assert!(
+            a <= 16,
+            "{a} buffers allocated for 300 frames: not recycled"
+        );
+        assert!(
+            out.iter().all(|e| e.receive_ns == 7_001 + e.seq),
+            "receive_ns overwritten"
+        );
     }
 
     #[test]

@@ -26,6 +26,9 @@ use std::sync::Arc;
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
+#[path = "support/node.rs"]
+mod node;
+
 static SERIAL_TESTS: Mutex<()> = Mutex::new(());
 
 const SIM: &str = "arv-fake-gv-camera-0.8";
@@ -501,4 +504,131 @@ fn the_node_pipeline_runs_on_the_camera_and_survives_its_loss() {
     p.request_stop();
     let status = p.join().unwrap();
     println!("pipeline status at the end: {status:?}");
+}
+
+/// An estimate and when its datagram arrived.
+type Arrival = (Instant, omnirow::estimate::Estimate);
+
+/// The daemon itself: `omnirow run` with `[source] kind = "camera"` streams from the
+/// simulator, publishes over UDP at the camera's rate, reports camera_lost when the simulator
+/// dies, resumes when it returns, and exits 0 on SIGTERM.
+#[test]
+fn omnirow_run_streams_from_the_camera_and_survives_its_loss() {
+    use omnirow::estimate::Status;
+    let _g = SERIAL_TESTS.lock().unwrap_or_else(|e| e.into_inner());
+    let sim = Simulator::start("SIMRUN", None);
+    let dir = node::tmpdir("camera");
+    let cfg = dir.join("omnirow.toml");
+    std::fs::write(
+        &cfg,
+        "[source]\nkind = \"camera\"\n\n[gige]\ncamera = \"SIMRUN\"\npixel_format = \"BayerRG8\"\n\
+         roi = { x = 0, y = 0, width = 2448, height = 2048 }\nframe_rate = 15.0\n\
+         pop_timeout_ms = 500\nreconnect_initial_ms = 200\nreconnect_max_ms = 1000\n\
+         realtime = false\n\n[gige.stream]\npacket_size = 16000\nsocket_buffer = 8388608\n\
+         packet_socket = false\n\n[http]\nenabled = false\n",
+    )
+    .unwrap();
+    let check = node::bin()
+        .args(["config", "check"])
+        .arg(&cfg)
+        .output()
+        .unwrap();
+    assert!(check.status.success(), "{check:?}");
+    let (sock, addr) = node::udp();
+    let mut child = node::bin()
+        .args([
+            "run",
+            "--no-print",
+            "--duration",
+            "120",
+            "--udp",
+            &addr,
+            "--config",
+        ])
+        .arg(&cfg)
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut got: Vec<Arrival> = Vec::new();
+    let mut buf = vec![0u8; 65536];
+    let mut recv_until =
+        |got: &mut Vec<Arrival>, what: &str, limit: Duration, cond: &dyn Fn(&[Arrival]) -> bool| {
+            let t0 = Instant::now();
+            while !cond(got) {
+                assert!(t0.elapsed() < limit, "{what}: not within {limit:?}");
+                if let Ok(n) = sock.recv(&mut buf) {
+                    got.push((Instant::now(), serde_json::from_slice(&buf[..n]).unwrap()));
+                }
+            }
+            t0.elapsed()
+        };
+    // Warm-up, then six seconds of streaming.
+    recv_until(&mut got, "first estimates", Duration::from_secs(30), &|g| {
+        g.len() >= 5
+    });
+    let start = got.len();
+    let t_start = Instant::now();
+    recv_until(&mut got, "six seconds", Duration::from_secs(10), &|_| {
+        t_start.elapsed() >= Duration::from_secs(6)
+    });
+    let window = &got[start..];
+    assert!(window.iter().all(|(_, e)| e.status != Status::CameraLost));
+    let (first, last) = (&window[0].1, &window[window.len() - 1].1);
+    let camera_hz =
+        (last.seq - first.seq) as f64 / ((last.capture_ns - first.capture_ns) as f64 / 1e9);
+    let published_hz =
+        (window.len() - 1) as f64 / ((last.capture_ns - first.capture_ns) as f64 / 1e9);
+    println!("camera {camera_hz:.2} Hz, published {published_hz:.2} Hz");
+    assert!(
+        published_hz >= 0.8 * camera_hz,
+        "published {published_hz:.2} Hz of the camera's {camera_hz:.2} Hz"
+    );
+    for w in window.windows(2) {
+        assert!(w[1].1.seq > w[0].1.seq && w[1].1.capture_ns > w[0].1.capture_ns);
+        assert!(w[1].1.receive_ns >= w[1].1.capture_ns.min(w[1].1.receive_ns));
+    }
+
+    drop(sim);
+    let killed = Instant::now();
+    recv_until(&mut got, "camera_lost", Duration::from_secs(5), &|g| {
+        g.iter()
+            .any(|(t, e)| *t >= killed && e.status == Status::CameraLost)
+    });
+    let lost_after = got
+        .iter()
+        .find(|(t, e)| *t >= killed && e.status == Status::CameraLost)
+        .map(|(t, _)| t.duration_since(killed))
+        .unwrap();
+    assert!(child.try_wait().unwrap().is_none(), "the daemon exited");
+    let back = Instant::now();
+    let _sim = Simulator::start("SIMRUN", None);
+    let n = got.len();
+    recv_until(
+        &mut got,
+        "estimates after the camera returned",
+        Duration::from_secs(15),
+        &|g| {
+            g[n..]
+                .iter()
+                .filter(|(_, e)| e.status != Status::CameraLost)
+                .count()
+                >= 3
+        },
+    );
+    let resumed = back.elapsed();
+    assert!(
+        resumed < Duration::from_secs(10),
+        "resumed after {resumed:?}"
+    );
+    println!(
+        "camera_lost published {lost_after:?} after the simulator died; estimates resumed {:?} after it restarted",
+        resumed
+    );
+    node::sigterm(&child);
+    let out = child.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
 }

@@ -28,6 +28,9 @@ const FRAME_NS: u64 = 50_000_000;
 #[path = "ros2/venv.rs"]
 mod venv;
 
+#[path = "support/node.rs"]
+mod run_node;
+
 /// The venv with cyclonedds and its `ddsls`.
 fn venv() -> Option<PathBuf> {
     let dir = venv::venv("cyclonedds")?;
@@ -642,4 +645,122 @@ mod node {
             assert!(fin > 0);
         }
     }
+}
+
+/// The whole node: `omnirow run` with `[ros2] enabled = true` on the synthetic drive. Cyclone
+/// decodes `heading_tilt` and `orientation`; each sample must carry exactly the estimate the
+/// node also sent over UDP for the same capture stamp, and that estimate must match the
+/// synthetic ground truth.
+#[test]
+fn omnirow_run_publishes_its_estimates_on_ros2() {
+    use omnirow::estimate::{Estimate, Status};
+    let Some(venv) = venv() else { return };
+    let d = domain(5);
+    let mut sub = Subscriber::start(
+        &venv,
+        d,
+        &[
+            "--want",
+            "heading_tilt=8",
+            "--want",
+            "orientation=8",
+            "--want",
+            "diagnostics=1",
+            "--timeout",
+            "60",
+        ],
+    );
+    let dir = run_node::tmpdir("ros2");
+    let cfg = run_node::small_config(
+        &dir,
+        &format!(
+            "[ros2]\nenabled = true\ndomain_id = {d}\nnetworks = [\"127.0.0.1\"]\nframe_id = \"test_base\"\n\n[ros2.qos]\nreliability = \"reliable\"\ndepth = 50\n"
+        ),
+    );
+    let (sock, addr) = run_node::udp();
+    let child = run_node::bin()
+        .args([
+            "run",
+            "--duration",
+            "70",
+            "--no-print",
+            "--udp",
+            &addr,
+            "--config",
+        ])
+        .arg(&cfg)
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut estimates: HashMap<u64, Estimate> = HashMap::new();
+    let mut buf = vec![0u8; 65536];
+    let t0 = Instant::now();
+    while sub.done().is_none() && t0.elapsed() < Duration::from_secs(70) {
+        if let Ok(n) = sock.recv(&mut buf) {
+            let e: Estimate = serde_json::from_slice(&buf[..n]).unwrap();
+            estimates.insert(e.capture_ns, e);
+        }
+    }
+    run_node::sigterm(&child);
+    // Datagrams still on their way.
+    while let Ok(n) = sock.recv(&mut buf) {
+        let e: Estimate = serde_json::from_slice(&buf[..n]).unwrap();
+        estimates.insert(e.capture_ns, e);
+    }
+    let (code, samples) = sub.finish(Duration::from_secs(5));
+    let out = child.wait_with_output().unwrap();
+    let log = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(code, 0, "subscriber failed; node log:\n{log}");
+    assert!(out.status.success(), "node failed:\n{log}");
+    let k = by_kind(&samples);
+    let mut checked = 0;
+    for m in &k["heading_tilt"] {
+        assert_eq!(m["header"]["frame_id"], "test_base");
+        let e = estimates
+            .get(&stamp_ns(m))
+            .unwrap_or_else(|| panic!("no UDP estimate with the stamp of {m}"));
+        let v: Vec<f64> = m["vector_bits"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|b| f64::from_bits(b.as_u64().unwrap()))
+            .collect();
+        if e.status != Status::Ok {
+            continue;
+        }
+        let (h, t) = (e.heading_rad.unwrap(), e.tilt_rad.unwrap());
+        // serde_json's default float parsing may be one ULP off; DDS carries the bits.
+        assert!(
+            (v[0] - h).abs() < 1e-12 && (v[1] - t).abs() < 1e-12,
+            "ROS 2 and UDP disagree for {m}: {h} {t}"
+        );
+        assert!((v[2] - e.quality).abs() < 1e-12);
+        let truth = e
+            .truth
+            .as_ref()
+            .expect("synthetic frames carry their truth");
+        assert!(
+            run_node::heading_err(h, truth.heading_rad).to_degrees() < 1.0,
+            "{e:?}"
+        );
+        assert!((t - truth.tilt_rad).abs().to_degrees() < 1.0, "{e:?}");
+        checked += 1;
+    }
+    assert!(
+        checked >= 6,
+        "only {checked} heading_tilt samples with status ok"
+    );
+    for m in &k["orientation"] {
+        let e = &estimates[&stamp_ns(m)];
+        let Some(h) = e.heading_rad else { continue };
+        let o: Vec<f64> = m["orientation"].as_array().unwrap().iter().map(f).collect();
+        let (x, y, z, w) = (o[0], o[1], o[2], o[3]);
+        let yaw = (2.0 * (x * y - w * z)).atan2(1.0 - 2.0 * (y * y + z * z));
+        assert!((yaw - h).abs() < 1e-9, "orientation {m} vs heading {h}");
+    }
+    let s = &k["diagnostics"][0]["status"][0];
+    assert!(
+        s["hardware_id"].as_str().unwrap().contains("synthetic"),
+        "{s}"
+    );
 }

@@ -187,6 +187,22 @@ fn ideal(lens: Lens) -> IdealLens {
     }
 }
 
+/// The GigE Vision camera of `[gige]` (`[source] kind = "camera"`).
+#[cfg(feature = "camera")]
+fn camera_source(g: &crate::gige::GigeConfig) -> anyhow::Result<Box<dyn Source>> {
+    // One frame may wait between the acquisition thread and the pipeline's own queue.
+    let cam = crate::source::gige::CameraSource::start(g.clone(), 1).context("[gige] camera")?;
+    Ok(Box::new(cam))
+}
+
+#[cfg(not(feature = "camera"))]
+fn camera_source(_: &crate::gige::GigeConfig) -> anyhow::Result<Box<dyn Source>> {
+    bail!(
+        "[source] kind = \"camera\": this omnirow was built without the `camera` feature \
+         (libaravis); build it with `cargo build --release --features camera` (README: Camera)"
+    )
+}
+
 /// The detector as the pipeline's processing step.
 struct DetectorWorker(Detector);
 
@@ -231,6 +247,7 @@ pub fn run(args: RunArgs, record_to: Option<PathBuf>) -> anyhow::Result<ExitCode
             looping: r.looping,
             topic: r.topic.clone(),
         })?),
+        SourceConfig::Camera(g) => camera_source(g)?,
     };
     let cal = match &cfg.calibration {
         CalibrationChoice::File(p) => Calibration::load(p)?,
@@ -238,8 +255,13 @@ pub fn run(args: RunArgs, record_to: Option<PathBuf>) -> anyhow::Result<ExitCode
         CalibrationChoice::Auto => match source.calibration() {
             Some(c) => c.clone(),
             None => {
-                tracing::warn!("no calibration configured or recorded: using the ideal 185° fisheye (camera.calibration)");
-                IdealLens::Fisheye185.calibration(2050, 2448)
+                // A camera's region of interest sets the frame size; otherwise the GC2450C's.
+                let (h, w) = match &cfg.source {
+                    SourceConfig::Camera(g) => g.roi.map_or((2050, 2448), |r| (r.height, r.width)),
+                    _ => (2050, 2448),
+                };
+                tracing::warn!("no calibration configured or recorded: using the ideal 185° fisheye at {w}x{h} (camera.calibration)");
+                IdealLens::Fisheye185.calibration(h, w)
             }
         },
     };
@@ -274,6 +296,16 @@ pub fn run(args: RunArgs, record_to: Option<PathBuf>) -> anyhow::Result<ExitCode
     };
     if print {
         publishers.push(Box::new(StdoutPublisher::new()));
+    }
+    if let Some(p) = crate::ros2::node_publisher(&cfg.ros2, &source.describe())
+        .context("[ros2] publisher (docs/ros2.md)")?
+    {
+        tracing::info!(
+            namespace = %cfg.ros2.namespace,
+            node = %cfg.ros2.node_name,
+            "publishing on ROS 2"
+        );
+        publishers.push(p);
     }
 
     let recorder = match &cfg.record {

@@ -67,6 +67,10 @@ impl Source for CameraSource {
     fn state(&self) -> SourceState {
         map_state(self.counters.state())
     }
+
+    fn recycler(&self) -> Option<crate::gige::Recycler> {
+        Some(self.camera.recycler())
+    }
 }
 
 /// The pipeline's view of the camera state.

@@ -35,7 +35,8 @@ pub enum SourceError {
 /// What a [`Source::poll`] returns.
 #[derive(Debug)]
 pub enum Poll {
-    /// A frame (its `receive_ns` is stamped by the pipeline when it arrives).
+    /// A frame. Its `receive_ns` is stamped by the pipeline when it arrives, unless the
+    /// source set it (a camera stamps the buffer's arrival from the network).
     Frame(Frame),
     /// No frame within the timeout (not yet due, or the camera is silent); see [`Source::state`].
     Idle,
@@ -86,6 +87,12 @@ pub trait Source: Send {
     /// The calibration the frames go with, when the source knows it (the synthetic lens, a
     /// recording's attached calibration); the configuration may override it.
     fn calibration(&self) -> Option<&crate::camera::Calibration> {
+        None
+    }
+    /// Where the pipeline gives back the pixel buffers of frames it is done with, for sources
+    /// that reuse them (the camera's preallocated pool, so steady state allocates nothing).
+    /// None (the default): finished buffers are freed.
+    fn recycler(&self) -> Option<crate::gige::Recycler> {
         None
     }
 }
