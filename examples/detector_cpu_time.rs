@@ -1,5 +1,5 @@
-//! Per-frame CPU time (this thread's, from /proc/thread-self/schedstat, so that other load on
-//! the machine does not count) of the whole detector per method on a synthetic 2448×2050 frame
+//! Per-frame CPU time (this thread's, CLOCK_THREAD_CPUTIME_ID, so that other load on the
+//! machine does not count) of the whole detector per method on a synthetic 2448×2050 frame
 //! (Table I protocol), with the combined detector's stage breakdown. Complements
 //! `cargo bench --bench edge`, whose wall-clock figures are only meaningful on an idle machine.
 //!
@@ -10,12 +10,13 @@ use omnirow::frame::ImageView;
 use omnirow::synth::{random_scene, render, Protocol};
 
 fn cpu_ns() -> Option<f64> {
-    std::fs::read_to_string("/proc/thread-self/schedstat")
-        .ok()?
-        .split_whitespace()
-        .next()?
-        .parse()
-        .ok()
+    let mut ts = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: clock_gettime writes one timespec through a valid pointer.
+    let rc = unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut ts) };
+    (rc == 0).then_some(ts.tv_sec as f64 * 1e9 + ts.tv_nsec as f64)
 }
 
 fn main() {
@@ -46,7 +47,7 @@ fn main() {
             let mut stages = [Vec::new(), Vec::new(), Vec::new(), Vec::new()];
             for _ in 0..frames {
                 let (Some(a), _) = (cpu_ns(), ()) else {
-                    eprintln!("no schedstat");
+                    eprintln!("no thread CPU clock");
                     return;
                 };
                 det.process(&view, &mut out).unwrap();

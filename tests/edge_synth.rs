@@ -110,3 +110,44 @@ fn fisheye_rows_and_vanishing_point() {
 fn pal_rows_and_vanishing_point() {
     check_lens("pal", ideal_pal(512, 612), 12);
 }
+
+/// Table I protocol (paper IV-A), fixed seeds, at 1224×1025 (the working resolution of a binned
+/// GC2450C frame): the edge method finds every vanishing point with a modest error, and the
+/// combined method is accurate and no worse than the better single method (loose margins; the
+/// full figures come from `omnirow eval` and `examples/methods_eval.rs`).
+#[test]
+fn table1_quick_edge_and_combined() {
+    for (name, cal) in [
+        ("fisheye", ideal_fisheye(1025, 1224)),
+        ("pal", ideal_pal(1025, 1224)),
+    ] {
+        let mut errs = [Vec::new(), Vec::new(), Vec::new()];
+        let methods = [Method::Hough, Method::Edge, Method::Combined];
+        for seed in 1..=4 {
+            let (img, truth) = scene(&cal, seed);
+            let vp = Vector3::from(truth.vp_along);
+            for (k, m) in methods.iter().enumerate() {
+                let det = detect(&cal, *m, &img);
+                let e = det
+                    .vanishing_point
+                    .map_or(f64::INFINITY, |v| axis_angle(&v.direction, &vp));
+                errs[k].push(e * 1e3);
+            }
+        }
+        let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+        let [hough, edge, comb] = [mean(&errs[0]), mean(&errs[1]), mean(&errs[2])];
+        eprintln!(
+            "{name}: mean VP error hough {hough:.3} edge {edge:.3} combined {comb:.3} mrad; {errs:?}"
+        );
+        assert!(edge < 0.8, "{name} edge: {errs:?}");
+        assert!(
+            errs[2].iter().all(|&e| e < 0.4),
+            "{name} combined: {errs:?}"
+        );
+        assert!(comb < 0.2, "{name} combined: {errs:?}");
+        assert!(
+            comb <= 1.15 * hough.min(edge),
+            "{name}: combined {comb} worse than the better single method ({hough}, {edge})"
+        );
+    }
+}

@@ -11,6 +11,7 @@
 //! (paper II-F, eq. 5: edge rows weighted w·support, Hough rows (1−w)·support, in one
 //! vanishing-point Hough).
 
+use super::combine::precision_fit;
 use super::edge::{EdgeDetector, EdgeError, EdgeOptions, EdgeResult};
 use super::hough::{HoughOptions, HoughResult, HoughRows};
 use super::mask::{build_mask, find_fov, MaskOptions, MaskResult};
@@ -68,11 +69,21 @@ pub struct CombinedOptions {
     /// The paper's w (eq. 5): edge rows vote for the vanishing point with w·support, Hough
     /// rows with (1−w)·support. Within (0, 1); default 0.7 as in the paper.
     pub edge_weight: f64,
+    /// After the vote, refit the vanishing point over its inlier rows with each method
+    /// weighted by the precision its rows show on the image (see [`super::combine`]).
+    /// Default true.
+    pub precision_weighting: bool,
+    /// The smallest per-method scatter (mrad) the precision weighting assumes. Default 0.02.
+    pub precision_floor_mrad: f64,
 }
 
 impl Default for CombinedOptions {
     fn default() -> Self {
-        CombinedOptions { edge_weight: 0.7 }
+        CombinedOptions {
+            edge_weight: 0.7,
+            precision_weighting: true,
+            precision_floor_mrad: 0.02,
+        }
     }
 }
 
@@ -515,6 +526,7 @@ pub struct Detector {
     edge: Option<EdgeDetector>,
     edge_rows: Vec<Row>,
     weights: Vec<f64>,
+    precision_weights: Vec<f64>,
     times: StageTimes,
     last_prepare: PrepareResult,
     last_hough: HoughResult,
@@ -527,6 +539,12 @@ impl Detector {
         if !(w > 0.0 && w < 1.0) {
             return Err(DetectError::Options(format!(
                 "combined.edge_weight = {w} must be within (0, 1)"
+            )));
+        }
+        let f = opts.combined.precision_floor_mrad;
+        if !(f > 0.0 && f < 100.0) {
+            return Err(DetectError::Options(format!(
+                "combined.precision_floor_mrad = {f} must be within (0, 100)"
             )));
         }
         // Check the edge options now rather than at the first image.
@@ -543,6 +561,7 @@ impl Detector {
             edge: None,
             edge_rows: Vec::with_capacity(64),
             weights: Vec::with_capacity(128),
+            precision_weights: Vec::with_capacity(128),
             times: StageTimes::default(),
             last_prepare: PrepareResult::default(),
             last_hough: HoughResult::default(),
@@ -613,6 +632,9 @@ impl Detector {
                 self.vanish.run(Some(&self.weights), out)?;
             }
         }
+        if method == Method::Combined && self.opts.combined.precision_weighting {
+            self.refit_by_precision(out);
+        }
         let t4 = Instant::now();
         self.times = StageTimes {
             prepare: t1 - t0,
@@ -621,6 +643,33 @@ impl Detector {
             vanishing: t4 - t3,
         };
         Ok(())
+    }
+
+    /// The combined method's final fit: the vote's vanishing point refitted over its inlier
+    /// rows with each method weighted by its measured precision ([`precision_fit`]).
+    fn refit_by_precision(&mut self, out: &mut Detection) {
+        let Some(vp) = out.vanishing_point else {
+            return;
+        };
+        let floor = self.opts.combined.precision_floor_mrad * 1e-3;
+        let inliers = self.vanish.inliers();
+        let Some(fit) = precision_fit(
+            &out.rows,
+            inliers,
+            &vp.direction,
+            floor,
+            &mut self.precision_weights,
+        ) else {
+            return;
+        };
+        let ht = heading_tilt(&fit.direction, &self.prep.calibration().mounting);
+        out.vanishing_point = Some(super::VanishingPoint {
+            direction: fit.direction,
+            inliers: vp.inliers,
+            residual_rad: fit.residual_rad,
+        });
+        out.heading_rad = Some(ht.heading_rad);
+        out.tilt_rad = Some(ht.tilt_rad);
     }
 
     /// Runs the edge method on the preparer's smoothed vegetation image and mask.
@@ -730,7 +779,10 @@ mod tests {
             let e = Detector::new(
                 &cal,
                 DetectorOptions {
-                    combined: CombinedOptions { edge_weight: w },
+                    combined: CombinedOptions {
+                        edge_weight: w,
+                        ..Default::default()
+                    },
                     ..Default::default()
                 },
             )

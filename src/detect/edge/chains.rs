@@ -16,13 +16,15 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ChainOptions {
-    /// Chains with fewer pixels are dropped. Default 12.
+    /// Chains with fewer pixels are dropped (before their pixels become rays). Default 20,
+    /// the splitting stage's shortest section: a shorter chain cannot give a section, and
+    /// noise makes many such chains.
     pub min_length: usize,
 }
 
 impl Default for ChainOptions {
     fn default() -> Self {
-        ChainOptions { min_length: 12 }
+        ChainOptions { min_length: 20 }
     }
 }
 
