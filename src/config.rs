@@ -11,6 +11,7 @@ use crate::gige::GigeConfig;
 use crate::pipeline::PipelineOptions;
 use crate::record::RecordOptions;
 use crate::ros2::Ros2Config;
+use crate::source::synthetic::SyntheticDriveOptions;
 use crate::source::Rate;
 use serde::Deserialize;
 use std::fmt;
@@ -60,29 +61,12 @@ impl std::error::Error for ConfigError {}
 /// Where frames come from.
 #[derive(Debug, Clone, PartialEq)]
 pub enum SourceConfig {
-    Synthetic(SyntheticConfig),
+    /// The synthetic drive (`[source.synthetic]`).
+    Synthetic(SyntheticDriveOptions),
     Replay(ReplayConfig),
     /// A GigE Vision camera through Aravis, configured by `[gige]` (needs the `camera`
     /// feature at run time; the configuration is checked on every build).
     Camera(GigeConfig),
-}
-
-/// The synthetic drive.
-#[derive(Debug, Clone, PartialEq)]
-pub struct SyntheticConfig {
-    pub fps: f64,
-    pub width: u32,
-    pub height: u32,
-    pub lens: Lens,
-    pub colour: bool,
-    pub seed: u64,
-    /// Forward speed along the rows, m/s.
-    pub speed_mps: f64,
-    /// Amplitude and period of the slowly varying heading, pitch and lateral offset.
-    pub heading_amplitude_deg: f64,
-    pub pitch_amplitude_deg: f64,
-    pub offset_amplitude_m: f64,
-    pub period_s: f64,
 }
 
 /// The ideal lenses omnirow ships.
@@ -483,7 +467,7 @@ fn validate(raw: RawConfig, c: &mut Check) -> Config {
                     }
                 }
             }
-            SourceConfig::Synthetic(SyntheticConfig {
+            SourceConfig::Synthetic(SyntheticDriveOptions {
                 fps: c.range("source.synthetic.fps", &syn.fps, 15.0, 0.1, 1000.0),
                 width,
                 height,
@@ -513,6 +497,7 @@ fn validate(raw: RawConfig, c: &mut Check) -> Config {
                     5.0,
                 ),
                 period_s: c.range("source.synthetic.period_s", &syn.period_s, 20.0, 0.1, 1e6),
+                render_threads: 0,
             })
         }
         SourceKind::Replay => {
