@@ -632,3 +632,66 @@ fn omnirow_run_streams_from_the_camera_and_survives_its_loss() {
         String::from_utf8_lossy(&out.stderr)
     );
 }
+
+/// A camera that is not there at start (unplugged at boot): the daemon tells systemd it is
+/// ready, publishes camera_lost while it keeps trying, and stops cleanly on SIGTERM.
+#[test]
+fn omnirow_run_without_its_camera_reports_camera_lost_and_stays_up() {
+    use omnirow::estimate::{Estimate, Status};
+    use std::os::unix::net::UnixDatagram;
+    let dir = node::tmpdir("nocamera");
+    let cfg = dir.join("omnirow.toml");
+    std::fs::write(
+        &cfg,
+        "[source]\nkind = \"camera\"\n[gige]\ncamera = \"omnirow-absent-camera\"\n\
+         reconnect_initial_ms = 100\nreconnect_max_ms = 200\nrealtime = false\n\
+         [http]\nenabled = false\n",
+    )
+    .unwrap();
+    let sock_path = dir.join("notify.sock");
+    let notify = UnixDatagram::bind(&sock_path).unwrap();
+    notify
+        .set_read_timeout(Some(Duration::from_millis(50)))
+        .unwrap();
+    let (sock, addr) = node::udp();
+    let child = node::bin()
+        .args([
+            "run",
+            "--no-print",
+            "--duration",
+            "60",
+            "--udp",
+            &addr,
+            "--config",
+        ])
+        .arg(&cfg)
+        .env("NOTIFY_SOCKET", &sock_path)
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let (mut ready, mut lost) = (None, None);
+    let mut buf = vec![0u8; 65536];
+    let t0 = Instant::now();
+    while (ready.is_none() || lost.is_none()) && t0.elapsed() < Duration::from_secs(30) {
+        if let Ok(n) = notify.recv(&mut buf) {
+            let m = String::from_utf8_lossy(&buf[..n]).into_owned();
+            if m.starts_with("READY=1") {
+                ready = Some(m);
+            }
+        }
+        if let Ok(n) = sock.recv(&mut buf) {
+            let e: Estimate = serde_json::from_slice(&buf[..n]).unwrap();
+            if e.status == Status::CameraLost {
+                lost = Some(t0.elapsed());
+            }
+        }
+    }
+    node::sigterm(&child);
+    let out = child.wait_with_output().unwrap();
+    let log = String::from_utf8_lossy(&out.stderr);
+    let ready = ready.unwrap_or_else(|| panic!("no READY=1; log:\n{log}"));
+    assert!(ready.contains("camera_lost"), "{ready}");
+    let lost = lost.unwrap_or_else(|| panic!("no camera_lost estimate; log:\n{log}"));
+    println!("camera_lost published {lost:?} after start");
+    assert!(out.status.success(), "exit {:?}:\n{log}", out.status);
+}

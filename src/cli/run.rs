@@ -363,9 +363,15 @@ pub fn run(args: RunArgs, record_to: Option<PathBuf>) -> anyhow::Result<ExitCode
             notifier.stopping("stopping: draining the pipeline");
             pipeline.request_stop();
         }
+        // Ready once frames flow, or once the camera is known to be absent: the node is then
+        // doing its job (publishing camera_lost, reconnecting), and systemd must not kill it
+        // for a slow start.
         if !ready && shared.frames_in() > 0 {
             ready = true;
             notifier.ready("streaming: first frames received");
+        } else if !ready && shared.source_state() == SourceState::Lost {
+            ready = true;
+            notifier.ready("camera_lost: no camera yet, reconnecting");
         }
         let alive = shared.alive();
         if alive != was_alive {
@@ -419,7 +425,7 @@ pub fn run(args: RunArgs, record_to: Option<PathBuf>) -> anyhow::Result<ExitCode
     if let Some(e) = shared.source_error() {
         bail!("source failed: {e}");
     }
-    if st.source_state == SourceState::Lost {
+    if st.source_state == SourceState::Lost && !stopping {
         bail!("the camera was lost");
     }
     Ok(ExitCode::SUCCESS)

@@ -77,7 +77,19 @@ impl Source for CameraSource {
     }
 
     fn state(&self) -> SourceState {
-        map_state(self.counters.state())
+        // A camera that cannot be opened at all (unplugged at boot) is as lost as one that
+        // went away: the node says camera_lost while it keeps trying.
+        let s = self.counters.state();
+        if s == CameraState::Connecting
+            && self
+                .counters
+                .connect_failures
+                .load(std::sync::atomic::Ordering::Relaxed)
+                > 0
+        {
+            return SourceState::Lost;
+        }
+        map_state(s)
     }
 
     fn recycler(&self) -> Option<crate::gige::Recycler> {
