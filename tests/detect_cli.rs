@@ -268,6 +268,54 @@ fn pal_lens_mask_radius_override_and_methods() {
             .iter()
             .all(|row| want.contains(&row["method"].as_str().unwrap())));
     }
+    // options from a node configuration's [detector]; --method still wins over it
+    let conf = dir.join("tuned.toml");
+    std::fs::write(
+        &conf,
+        "[detector]\nmethod = \"edge\"\n[detector.hough]\nmax_rows = 2\n",
+    )
+    .unwrap();
+    let args = |method: Option<&'static str>| {
+        let mut a = vec![
+            "detect".to_string(),
+            "--calib".into(),
+            calib.to_str().unwrap().into(),
+            "--mask-radius".into(),
+            radii.clone(),
+            "--config".into(),
+            conf.to_str().unwrap().into(),
+        ];
+        if let Some(m) = method {
+            a.extend(["--method".to_string(), m.to_string()]);
+        }
+        a.push(p.to_str().unwrap().into());
+        a
+    };
+    let a = args(None);
+    let (code, lines, stderr) = run(&a.iter().map(String::as_str).collect::<Vec<_>>());
+    assert_eq!(code, 0, "{stderr}");
+    assert_eq!(lines[0]["method"], "edge");
+    let a = args(Some("hough"));
+    let (code, lines, stderr) = run(&a.iter().map(String::as_str).collect::<Vec<_>>());
+    assert_eq!(code, 0, "{stderr}");
+    assert_eq!(lines[0]["method"], "hough");
+    assert!(
+        lines[0]["rows"].as_array().unwrap().len() <= 2,
+        "{}",
+        lines[0]
+    );
+    std::fs::write(&conf, "[detector.hough]\nmax_rowz = 2\n").unwrap();
+    let a = args(None);
+    let out = Command::new(env!("CARGO_BIN_EXE_omnirow"))
+        .args(&a)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("tuned.toml:2") && err.contains("max_rowz"),
+        "{err}"
+    );
 }
 
 #[test]

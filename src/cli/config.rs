@@ -1,4 +1,4 @@
-//! `omnirow config check FILE` and `omnirow config default`.
+//! `omnirow config check FILE`, `omnirow config default` and `omnirow config detector`.
 
 use crate::config::Config;
 use clap::Subcommand;
@@ -13,6 +13,9 @@ pub enum ConfigCommand {
     Check { file: PathBuf },
     /// Print the documented default configuration (config/omnirow.toml).
     Default,
+    /// Print every detector option with its default value, as a `[detector]` section to
+    /// paste into the configuration (or into an options file) and tune.
+    Detector,
 }
 
 /// `omnirow config check|default`.
@@ -32,5 +35,37 @@ pub fn run(cmd: ConfigCommand) -> anyhow::Result<ExitCode> {
             print!("{}", include_str!("../../config/omnirow.toml"));
             Ok(ExitCode::SUCCESS)
         }
+        ConfigCommand::Detector => {
+            print!("{}", detector_defaults()?);
+            Ok(ExitCode::SUCCESS)
+        }
+    }
+}
+
+/// The detector's default options as TOML tables under `[detector]`.
+pub fn detector_defaults() -> anyhow::Result<String> {
+    #[derive(serde::Serialize)]
+    struct Wrapper {
+        detector: crate::detect::DetectorOptions,
+    }
+    let text = toml::to_string(&Wrapper {
+        detector: crate::detect::DetectorOptions::default(),
+    })?;
+    Ok(format!(
+        "# omnirow's detector options and their defaults (`omnirow config detector`).\n\
+         # Paste into the node's configuration and keep only what you change.\n\n{text}"
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn detector_defaults_parse_back_to_the_defaults() {
+        let text = detector_defaults().unwrap();
+        let cfg = Config::parse(&text, "detector.toml").unwrap();
+        assert_eq!(cfg.detector, crate::detect::DetectorOptions::default());
+        assert!(text.contains("[detector.hough]"), "{text}");
     }
 }

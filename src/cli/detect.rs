@@ -20,9 +20,13 @@ pub struct DetectArgs {
     /// OCamCalib calib_results.txt or omnirow TOML calibration.
     #[arg(long, value_name = "FILE")]
     pub calib: PathBuf,
-    /// Row-detection method.
-    #[arg(long, value_enum, default_value_t = MethodArg::Combined)]
-    pub method: MethodArg,
+    /// Row-detection method [default: the configuration's, else combined].
+    #[arg(long, value_enum)]
+    pub method: Option<MethodArg>,
+    /// Take the detector's options from the `[detector]` section of this node
+    /// configuration (`omnirow config detector` prints them all), to tune offline.
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
     /// Field-of-view mask radii MIN,MAX in pixels of the calibration's own resolution
     /// (overrides the calibration's mask).
     #[arg(long, value_name = "MIN,MAX", value_parser = parse_radii)]
@@ -136,11 +140,14 @@ pub fn run(args: DetectArgs) -> anyhow::Result<ExitCode> {
             outer_radius_px: hi,
         });
     }
-    let method: Method = args.method.into();
-    let opts = DetectorOptions {
-        method,
-        ..Default::default()
+    let mut opts = match &args.config {
+        Some(p) => crate::config::Config::load(p)?.detector,
+        None => DetectorOptions::default(),
     };
+    if let Some(m) = args.method {
+        opts.method = m.into();
+    }
+    let method: Method = opts.method;
     let mut detector = Detector::new(&cal, opts)?;
     if let Some(dir) = &args.overlay {
         std::fs::create_dir_all(dir)
