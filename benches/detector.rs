@@ -58,12 +58,18 @@ fn bench(c: &mut Criterion) {
         });
         // Stages on the same buffers.
         let mut veg = GreyImage::default();
+        // Filled once here so that each stage has its input even when a filter skips the
+        // stages before it.
+        vegetation_image(&view, &opts.vegetation, true, &mut veg).unwrap();
         g.bench_function("vegetation", |b| {
             b.iter(|| vegetation_image(&view, &opts.vegetation, true, &mut veg).unwrap())
         });
         let gauss = Gaussian::new(&opts.smooth).unwrap();
         let mut tmp = Vec::new();
         let mut sm = veg.clone();
+        gauss
+            .apply(&veg.data, veg.width, veg.height, &mut tmp, &mut sm.data)
+            .unwrap();
         g.bench_function("smooth", |b| {
             b.iter(|| {
                 gauss
@@ -105,8 +111,10 @@ fn bench(c: &mut Criterion) {
         });
         let bands = hough.bands().to_vec();
         let mut rows2 = rows.clone();
+        // The detector refits with the first vanishing point of the Hough rows.
+        let vp0 = out.vanishing_point.map(|v| v.direction);
         g.bench_function("refit", |b| {
-            b.iter(|| prep.refit(&mut rows2, &bands, None, false).unwrap())
+            b.iter(|| prep.refit(&mut rows2, &bands, vp0.as_ref(), false).unwrap())
         });
         let mut vs = omnirow::detect::VanishingStage::new(&cal, &opts).unwrap();
         let mut d2 = Detection {
@@ -177,7 +185,7 @@ fn bench(c: &mut Criterion) {
                 .unwrap();
         });
         stage_cpu("refit", &mut || {
-            prep.refit(&mut rows2, &bands, None, false).unwrap();
+            prep.refit(&mut rows2, &bands, vp0.as_ref(), false).unwrap();
         });
         stage_cpu("vanishing", &mut || {
             vs.run(None, &mut d2).unwrap();

@@ -168,6 +168,8 @@ pub struct Preparer {
     smoothed: GreyImage,
     tmp: Vec<u8>,
     kept: Vec<u32>,
+    /// The refit's pixels near one row (room for every valid pixel, reserved at setup).
+    candidates: Vec<u32>,
     last_threshold: ThresholdResult,
 }
 
@@ -195,6 +197,7 @@ impl Preparer {
             smoothed: GreyImage::default(),
             tmp: Vec::new(),
             kept: Vec::new(),
+            candidates: Vec::new(),
             last_threshold: ThresholdResult::default(),
         })
     }
@@ -334,6 +337,7 @@ impl Preparer {
         );
         self.tmp.resize(n, 0);
         self.kept.reserve(self.opts.threshold.target_points + 1);
+        self.candidates = Vec::with_capacity(mask_result.valid);
         tracing::debug!(
             width = view.width,
             height = view.height,
@@ -402,7 +406,7 @@ impl Preparer {
     /// With the rows' vanishing point `vp` (an estimate), each row's band narrows towards
     /// it; with `perspective` too, each row's perspective bias is removed.
     pub fn refit(
-        &self,
+        &mut self,
         rows: &mut [Row],
         bands: &[f64],
         vp: Option<&Vector3<f64>>,
@@ -425,15 +429,16 @@ impl Preparer {
             tiles: &s.tiles,
             pixel_angle: s.pixel_angle,
             model: &s.work_cal.model,
+            background: bg.round().clamp(0.0, 254.0) as u8,
         };
         refit_rows(
             &img,
-            bg.round().clamp(0.0, 254.0) as u8,
             rows,
             bands,
             vp,
             perspective,
             &self.opts.refit,
+            &mut self.candidates,
         )
     }
 }

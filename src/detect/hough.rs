@@ -127,10 +127,12 @@ pub struct HoughRows {
     /// cos θ and sin θ at the θ column edges (theta_bins + 1 values).
     cos_e: Vec<f32>,
     sin_e: Vec<f32>,
-    /// φ (in cells) at each edge for the current ray.
-    edge: Vec<f32>,
+    /// φ cell at each column edge for the current ray.
+    edge: Vec<i32>,
     /// Votes, column-major: acc[k * phi_bins + j] for θ column k, φ cell j.
     acc: Vec<u32>,
+    /// The votes as differences along each column (phi_bins + 1 per column).
+    diff: Vec<u32>,
     peaks: Vec<(u32, u32)>,
     sel: Vec<u32>,
     /// Refined candidates with the half-width (radians) of their final band.
@@ -169,6 +171,32 @@ pub fn fast_atan2(y: f32, x: f32) -> f32 {
     }
 }
 
+/// atan2(y, x) for y ≥ 0 (result in [0, π]), branch-free so that loops over it vectorise;
+/// the same polynomial as [`fast_atan2`].
+#[inline(always)]
+fn atan2_upper(y: f32, x: f32) -> f32 {
+    let ax = x.abs();
+    let mn = ax.min(y);
+    let mx = ax.max(y).max(f32::MIN_POSITIVE);
+    let a = mn / mx;
+    let s = a * a;
+    let r = ((((-0.013_480_47 * s + 0.057_477_314) * s - 0.121_239_07) * s + 0.195_635_93) * s
+        - 0.332_994_96)
+        * s
+        * a
+        + a;
+    let r = if y > ax {
+        std::f32::consts::FRAC_PI_2 - r
+    } else {
+        r
+    };
+    if x < 0.0 {
+        PI32 - r
+    } else {
+        r
+    }
+}
+
 impl HoughRows {
     pub fn new(opts: HoughOptions) -> Result<Self, DetectError> {
         opts.validate()?;
@@ -183,8 +211,9 @@ impl HoughRows {
             opts,
             cos_e,
             sin_e,
-            edge: vec![0.0; t + 1],
+            edge: vec![0; t + 1],
             acc: vec![0; t * opts.phi_bins],
+            diff: vec![0; t * (opts.phi_bins + 1)],
             peaks: Vec::with_capacity(t * opts.phi_bins),
             sel: Vec::new(),
             found: Vec::with_capacity(4 * opts.max_rows),
@@ -239,31 +268,44 @@ impl HoughRows {
     }
 
     /// Casts the votes of all rays.
+    ///
+    /// Each ray fills, in every θ column, the run of φ cells between its curve's values at
+    /// the column's two edges. A run is recorded as +1 at its first cell and −1 after its
+    /// last in a difference array, and the columns are summed once at the end, so a vote
+    /// costs the same whatever the run's length (a ray on the accumulator's equator fills
+    /// whole columns).
+    #[inline(never)]
     fn vote(&mut self, rays: &[[f32; 3]]) {
         let p = self.opts.phi_bins;
         let t = self.opts.theta_bins;
         let scale = p as f32 / PI32;
         let pmax = (p - 1) as f32;
-        self.acc.fill(0);
+        let stride = p + 1;
+        self.diff.fill(0);
         for r in rays {
-            let (px, py, mz) = (r[0], r[1], -r[2]);
+            // φ(θ) = atan2(−p_z, p_x cos θ + p_y sin θ) taken in [0, π): the same as
+            // atan2(|p_z|, ±(p_x cos θ + p_y sin θ)) with the sign of −p_z.
+            let mz = -r[2];
+            let sign = if mz < 0.0 { -1.0f32 } else { 1.0 };
+            let (px, py, y) = (r[0] * sign, r[1] * sign, mz.abs());
+            // The φ cell at every column edge (a loop the compiler vectorises).
             for ((e, &c), &s) in self.edge.iter_mut().zip(&self.cos_e).zip(&self.sin_e) {
-                let mut phi = fast_atan2(mz, px * c + py * s);
-                if phi < 0.0 {
-                    phi += PI32;
-                }
-                *e = (phi * scale).min(pmax);
+                *e = (atan2_upper(y, px * c + py * s) * scale).min(pmax) as i32;
             }
-            for k in 0..t {
-                let (a, b) = (self.edge[k] as usize, self.edge[k + 1] as usize);
-                let (lo, hi) = if a <= b { (a, b) } else { (b, a) };
-                let col = &mut self.acc[k * p..(k + 1) * p];
-                // φ(θ) is continuous for a fixed ray (atan2 of a fixed-sign numerator), so the
-                // cells between the two edges are exactly those the curve crosses; a ray on the
-                // accumulator's equator fills a whole column (its meridian).
-                for v in &mut col[lo..=hi] {
-                    *v += 1;
-                }
+            // φ(θ) is continuous for a fixed ray (atan2 of a fixed-sign numerator), so the
+            // cells between a column's two edges are exactly those the curve crosses.
+            for (col, e) in self.diff.chunks_exact_mut(stride).zip(self.edge.windows(2)) {
+                let (lo, hi) = (e[0].min(e[1]) as usize, e[0].max(e[1]) as usize);
+                col[lo] = col[lo].wrapping_add(1);
+                col[hi + 1] = col[hi + 1].wrapping_sub(1);
+            }
+        }
+        for k in 0..t {
+            let mut sum = 0u32;
+            let col = &self.diff[k * stride..k * stride + p];
+            for (a, &d) in self.acc[k * p..(k + 1) * p].iter_mut().zip(col) {
+                sum = sum.wrapping_add(d);
+                *a = sum;
             }
         }
     }
@@ -284,6 +326,7 @@ impl HoughRows {
         (kk * p + jj) as usize
     }
 
+    #[inline(never)]
     fn find_peaks(&mut self) -> u32 {
         let p = self.opts.phi_bins;
         let t = self.opts.theta_bins;
@@ -320,6 +363,7 @@ impl HoughRows {
 
     /// Refines a peak's normal on the points near its great circle. Returns the row, or
     /// `None` when too few points support it or they do not define a great circle.
+    #[inline(never)]
     fn refine(
         &mut self,
         n0: Vector3<f64>,
@@ -596,6 +640,50 @@ pub(crate) mod tests {
                 assert!(hit, "ray {p:?} normal {n:?} cell {k},{j}");
             }
         }
+    }
+
+    #[test]
+    fn difference_votes_equal_filling_each_run() {
+        // The vote as first written: every cell of each column's run incremented.
+        let mut rng = Lcg(17);
+        let rays: Vec<[f32; 3]> = (0..300)
+            .map(|i| {
+                let mut p = Vector3::new(rng.gauss(), rng.gauss(), rng.gauss()).normalize();
+                if i % 50 == 0 {
+                    p.z = 0.0; // on the accumulator's equator: whole columns
+                }
+                let p = p.normalize();
+                [p.x as f32, p.y as f32, p.z as f32]
+            })
+            .collect();
+        let mut h = HoughRows::new(HoughOptions::default()).unwrap();
+        h.vote(&rays);
+        let (p, t) = (h.opts.phi_bins, h.opts.theta_bins);
+        let mut naive = vec![0u32; p * t];
+        let cell = |phi: f32| (phi * p as f32 / PI32).min((p - 1) as f32) as usize;
+        for r in &rays {
+            let phi = |k: usize| {
+                let th = k as f32 * PI32 / t as f32;
+                let f = fast_atan2(-r[2], r[0] * th.cos() + r[1] * th.sin());
+                cell(if f < 0.0 { f + PI32 } else { f })
+            };
+            for k in 0..t {
+                let (a, b) = (phi(k), phi(k + 1));
+                for v in &mut naive[k * p + a.min(b)..=k * p + a.max(b)] {
+                    *v += 1;
+                }
+            }
+        }
+        let differ = naive
+            .iter()
+            .zip(h.accumulator())
+            .filter(|(a, b)| a != b)
+            .count();
+        // Only cells whose edge value falls within float rounding of a cell boundary differ.
+        assert!(differ < 20, "{differ} cells differ");
+        let total: u64 = naive.iter().map(|&v| v as u64).sum();
+        let got: u64 = h.accumulator().iter().map(|&v| v as u64).sum();
+        assert!((total as i64 - got as i64).abs() < 40, "{total} vs {got}");
     }
 
     #[test]

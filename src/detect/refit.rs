@@ -36,10 +36,6 @@ pub struct RefitOptions {
     pub full_sections: bool,
     /// Given a vanishing point, narrow each row's band towards it (see [`refit_rows`]).
     pub wedge: bool,
-    /// With the wedge: after each iteration the band's half-width at the row's foot becomes
-    /// this many times the RMS of the row's scaled offsets (never wider than before);
-    /// 0 keeps the Hough band.
-    pub band_rms_factor: f64,
 }
 
 impl Default for RefitOptions {
@@ -52,7 +48,6 @@ impl Default for RefitOptions {
             perspective: false,
             full_sections: true,
             wedge: true,
-            band_rms_factor: 2.0,
         }
     }
 }
@@ -159,6 +154,8 @@ pub struct RefitImage<'a> {
     /// The camera model at the working resolution (to check which stretches of a row's band
     /// lie inside the mask).
     pub model: &'a OcamModel,
+    /// Pixels at or below this level weigh nothing (the background).
+    pub background: u8,
 }
 
 /// Samples around a row's great circle at which its cross-section is checked.
@@ -216,7 +213,7 @@ impl RefitImage<'_> {
 }
 
 /// Refits each row's normal on the image's pixels within its band (`bands[i]`, radians,
-/// widened by the margin); `background` is the level below which pixels weigh nothing.
+/// widened by the margin), weighted by their value above the image's background.
 /// Rows whose refit fails keep their normal. Returns the number of rows refitted.
 ///
 /// With the rows' vanishing point `vp` (an estimate is enough), the band is a wedge: a row
@@ -235,12 +232,12 @@ impl RefitImage<'_> {
 /// The fit solves for the normal's correction and A together (linear least squares).
 pub fn refit_rows(
     img: &RefitImage,
-    background: u8,
     rows: &mut [Row],
     bands: &[f64],
     vp: Option<&Vector3<f64>>,
     perspective: bool,
     opts: &RefitOptions,
+    candidates: &mut Vec<u32>,
 ) -> Result<usize, DetectError> {
     if rows.len() != bands.len() {
         return Err(DetectError::Buffer(format!(
@@ -262,33 +259,34 @@ pub fn refit_rows(
         )));
     }
     let margin = opts.margin_px * img.pixel_angle;
+    // The normal moves by a fraction of a pixel between iterations: pixels are collected
+    // once per row within its band widened by this, then each iteration reads only them.
+    let slack = 2.0 * img.pixel_angle;
     let wedge = vp.filter(|_| opts.wedge);
     let vf = wedge.map_or([0f32; 3], |v| [v.x as f32, v.y as f32, v.z as f32]);
+    let background = img.background;
     let mut done = 0;
-    for (row, &hough_band) in rows.iter_mut().zip(bands) {
-        let mut foot_band = hough_band;
+    for (row, &foot_band) in rows.iter_mut().zip(bands) {
         let mut n = row.normal;
+        collect_candidates(
+            img,
+            &n,
+            foot_band + slack,
+            margin + slack,
+            wedge,
+            candidates,
+        );
+        if opts.full_sections {
+            // Decided once per row: between iterations the circle moves by a fraction of a
+            // pixel, which leaves the stretches where its cross-section is whole unchanged.
+            keep_full_sections(img, &n, foot_band, margin, wedge, candidates);
+        }
+        let band = foot_band + margin;
+        let s_band = band.min(1.5).sin() as f32;
+        let (s_foot, s_margin) = (foot_band.min(1.5).sin() as f32, margin.sin() as f32);
         let mut ok = false;
-        let mut sections = [true; SECTION_SAMPLES];
         for _ in 0..opts.iterations {
-            let band = foot_band + margin;
-            let s_band = band.min(1.5).sin() as f32;
-            let (s_foot, s_margin) = (foot_band.min(1.5).sin() as f32, margin.sin() as f32);
-            // Weighted second moment of the offsets scaled to the foot (wedge only).
-            let (mut su2, mut sw) = (0f64, 0f64);
             let nf = [n.x as f32, n.y as f32, n.z as f32];
-            // The circle's own frame: s = atan2(f2·p, f1·p) is the same for a pixel and its
-            // mirror image across the circle, so a stretch is kept or dropped whole.
-            let f1 = any_perpendicular(&n);
-            let f2 = n.cross(&f1);
-            if opts.full_sections {
-                img.full_sections(&n, &f1, &f2, foot_band, margin, wedge, &mut sections);
-            }
-            let (f1f, f2f) = (
-                [f1.x as f32, f1.y as f32, f1.z as f32],
-                [f2.x as f32, f2.y as f32, f2.z as f32],
-            );
-            let ks = SECTION_SAMPLES as f32 / std::f32::consts::TAU;
             let mut sc = Scatter::new();
             // Normal equations of the biased model: features (e1·p, e2·p, −(f·p)³), target −n·p.
             let basis = vp.filter(|_| perspective).map(|v| {
@@ -298,62 +296,28 @@ pub fn refit_rows(
             });
             let mut ata = nalgebra::Matrix3::<f64>::zeros();
             let mut atb = Vector3::<f64>::zeros();
-            for tile in &t.list {
-                let d = nf[0] * tile.centre[0] + nf[1] * tile.centre[1] + nf[2] * tile.centre[2];
-                let reach = (band as f32 + tile.radius).min(std::f32::consts::FRAC_PI_2);
-                if d.abs() > reach.sin() {
+            for &i in candidates.iter() {
+                let i = i as usize;
+                let p = img.rays[i];
+                let d = (nf[0] * p[0] + nf[1] * p[1] + nf[2] * p[2]).abs();
+                if d >= s_band {
                     continue;
                 }
-                let (r0, c0) = (tile.r0 as usize, tile.c0 as usize);
-                for r in r0..(r0 + t.size).min(t.height) {
-                    let base = r * t.width;
-                    for c in c0..(c0 + t.size).min(t.width) {
-                        let i = base + c;
-                        let v = img.values[i] & img.mask[i];
-                        if v <= background {
-                            continue;
-                        }
-                        let p = img.rays[i];
-                        let d = (nf[0] * p[0] + nf[1] * p[1] + nf[2] * p[2]).abs();
-                        if d >= s_band {
-                            continue;
-                        }
-                        let mut c = 1.0;
-                        if wedge.is_some() {
-                            let a = vf[0] * p[0] + vf[1] * p[1] + vf[2] * p[2];
-                            c = (1.0 - a * a).max(0.0).sqrt();
-                            if d >= s_foot * c + s_margin {
-                                continue;
-                            }
-                        }
-                        if opts.full_sections {
-                            let a = fast_atan2(
-                                f2f[0] * p[0] + f2f[1] * p[1] + f2f[2] * p[2],
-                                f1f[0] * p[0] + f1f[1] * p[1] + f1f[2] * p[2],
-                            );
-                            let k = ((a * ks + 0.5).floor() as isize)
-                                .rem_euclid(SECTION_SAMPLES as isize)
-                                as usize;
-                            if !sections[k] {
-                                continue;
-                            }
-                        }
-                        let w = (v - background) as f64 * img.solid[i] as f64;
-                        if wedge.is_some() && c > 0.2 {
-                            let u = (d / c) as f64;
-                            su2 += w * u * u;
-                            sw += w;
-                        }
-                        let pv = Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64);
-                        if let Some((e1, e2)) = basis {
-                            let g = e1.dot(&pv);
-                            let phi = Vector3::new(g, e2.dot(&pv), -g * g * g);
-                            ata += w * phi * phi.transpose();
-                            atb += w * phi * -n.dot(&pv);
-                        } else {
-                            sc.add(&pv, w);
-                        }
+                if wedge.is_some() {
+                    let a = vf[0] * p[0] + vf[1] * p[1] + vf[2] * p[2];
+                    if d >= s_foot * (1.0 - a * a).max(0.0).sqrt() + s_margin {
+                        continue;
                     }
+                }
+                let w = (img.values[i] - background) as f64 * img.solid[i] as f64;
+                let pv = Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+                if let Some((e1, e2)) = basis {
+                    let g = e1.dot(&pv);
+                    let phi = Vector3::new(g, e2.dot(&pv), -g * g * g);
+                    ata += w * phi * phi.transpose();
+                    atb += w * phi * -n.dot(&pv);
+                } else {
+                    sc.add(&pv, w);
                 }
             }
             if let Some((e1, e2)) = basis {
@@ -377,13 +341,6 @@ pub fn refit_rows(
                 }
                 _ => break,
             }
-            // Within the wedge the row's half-width at its foot is about √3 × the RMS of
-            // the scaled offsets (a uniform strip): narrow the band to it (never widen),
-            // so that fewer background pixels (noise) weigh in.
-            if wedge.is_some() && sw > 0.0 && opts.band_rms_factor > 0.0 {
-                let rms = (su2 / sw).sqrt().asin();
-                foot_band = (opts.band_rms_factor * rms).min(foot_band);
-            }
         }
         if ok {
             row.normal = canonical(&n);
@@ -391,6 +348,99 @@ pub fn refit_rows(
         }
     }
     Ok(done)
+}
+
+/// Keeps in `candidates` only the pixels on stretches of the great circle of `n` whose
+/// whole cross-section (see [`RefitImage::full_sections`]) lies inside the mask. A stretch
+/// is found from s = atan2(f2·p, f1·p) in the circle's own frame, which is the same for a
+/// pixel and its mirror image across the circle, so a stretch is kept or dropped whole.
+fn keep_full_sections(
+    img: &RefitImage,
+    n: &Vector3<f64>,
+    foot_band: f64,
+    margin: f64,
+    vp: Option<&Vector3<f64>>,
+    candidates: &mut Vec<u32>,
+) {
+    let f1 = any_perpendicular(n);
+    let f2 = n.cross(&f1);
+    let mut sections = [true; SECTION_SAMPLES];
+    img.full_sections(n, &f1, &f2, foot_band, margin, vp, &mut sections);
+    if sections.iter().all(|&k| k) {
+        return;
+    }
+    let (f1f, f2f) = (
+        [f1.x as f32, f1.y as f32, f1.z as f32],
+        [f2.x as f32, f2.y as f32, f2.z as f32],
+    );
+    let ks = SECTION_SAMPLES as f32 / std::f32::consts::TAU;
+    candidates.retain(|&i| {
+        let p = img.rays[i as usize];
+        let a = fast_atan2(
+            f2f[0] * p[0] + f2f[1] * p[1] + f2f[2] * p[2],
+            f1f[0] * p[0] + f1f[1] * p[1] + f1f[2] * p[2],
+        );
+        sections[((a * ks + 0.5) as i32).rem_euclid(SECTION_SAMPLES as i32) as usize]
+    });
+}
+
+/// Writes into `out` the pixels above the background within the band of `n`: half-width
+/// `foot_band` + `margin`, or with a vanishing point `vp` the wedge `foot_band`·sin(angle
+/// from `vp`) + `margin`. Tiles whose cone of rays misses the band are skipped whole.
+fn collect_candidates(
+    img: &RefitImage,
+    n: &Vector3<f64>,
+    foot_band: f64,
+    margin: f64,
+    vp: Option<&Vector3<f64>>,
+    out: &mut Vec<u32>,
+) {
+    out.clear();
+    let background = img.background;
+    let t = img.tiles;
+    let nf = [n.x as f32, n.y as f32, n.z as f32];
+    let vf = vp.map_or([0f32; 3], |v| [v.x as f32, v.y as f32, v.z as f32]);
+    let s_band = (foot_band + margin).min(1.5).sin() as f32;
+    let (s_foot, s_margin) = (foot_band.min(1.5).sin() as f32, margin.sin() as f32);
+    let (foot, margin) = (foot_band as f32, margin as f32);
+    for tile in &t.list {
+        let ct = tile.centre;
+        let d = (nf[0] * ct[0] + nf[1] * ct[1] + nf[2] * ct[2]).abs();
+        // The widest the band gets over the tile.
+        let band = if vp.is_some() {
+            let a = vf[0] * ct[0] + vf[1] * ct[1] + vf[2] * ct[2];
+            let c = ((1.0 - a * a).max(0.0).sqrt() + tile.radius).min(1.0);
+            foot * c + margin
+        } else {
+            foot + margin
+        };
+        let reach = (band + tile.radius).min(std::f32::consts::FRAC_PI_2);
+        if d > reach.sin() {
+            continue;
+        }
+        let (r0, c0) = (tile.r0 as usize, tile.c0 as usize);
+        for r in r0..(r0 + t.size).min(t.height) {
+            let base = r * t.width;
+            for c in c0..(c0 + t.size).min(t.width) {
+                let i = base + c;
+                if img.values[i] & img.mask[i] <= background {
+                    continue;
+                }
+                let p = img.rays[i];
+                let d = (nf[0] * p[0] + nf[1] * p[1] + nf[2] * p[2]).abs();
+                if d >= s_band {
+                    continue;
+                }
+                if vp.is_some() {
+                    let a = vf[0] * p[0] + vf[1] * p[1] + vf[2] * p[2];
+                    if d >= s_foot * (1.0 - a * a).max(0.0).sqrt() + s_margin {
+                        continue;
+                    }
+                }
+                out.push(i as u32);
+            }
+        }
+    }
 }
 
 #[cfg(test)]
@@ -447,6 +497,7 @@ mod tests {
             tiles: &tiles,
             pixel_angle: 0.0135,
             model: &cal.model,
+            background: 10,
         };
         // start 5 mrad off
         let start = (truth + Vector3::new(0.0, 0.0, 0.005)).normalize();
@@ -455,14 +506,15 @@ mod tests {
             method: Method::Hough,
             support: 100,
         }];
+        let mut cand = Vec::new();
         let n = refit_rows(
             &img,
-            10,
             &mut rows,
             &[0.05],
             None,
             false,
             &RefitOptions::default(),
+            &mut cand,
         )
         .unwrap();
         assert_eq!(n, 1);
@@ -474,12 +526,12 @@ mod tests {
         );
         assert!(refit_rows(
             &img,
-            10,
             &mut rows,
             &[],
             None,
             false,
-            &RefitOptions::default()
+            &RefitOptions::default(),
+            &mut cand,
         )
         .is_err());
     }
