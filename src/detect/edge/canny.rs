@@ -486,10 +486,10 @@ fn nms_hysteresis(
 ) -> usize {
     stack.clear();
     let w = width as isize;
-    for r in 1..height - 1 {
+    for (r, &(span_lo, span_hi)) in spans.iter().enumerate().take(height - 1).skip(1) {
         let row = r * width;
         // Only the mask's columns of this row, never the border.
-        let (lo, hi) = (spans[r].0.max(1), spans[r].1.min(width - 1));
+        let (lo, hi) = (span_lo.max(1), span_hi.min(width - 1));
         if hi <= lo {
             continue;
         }
