@@ -106,7 +106,7 @@ fn bench(c: &mut Criterion) {
         let bands = hough.bands().to_vec();
         let mut rows2 = rows.clone();
         g.bench_function("refit", |b| {
-            b.iter(|| prep.refit(&mut rows2, &bands, None).unwrap())
+            b.iter(|| prep.refit(&mut rows2, &bands, None, false).unwrap())
         });
         let mut vs = omnirow::detect::VanishingStage::new(&cal, &opts).unwrap();
         let mut d2 = Detection {
@@ -177,7 +177,7 @@ fn bench(c: &mut Criterion) {
                 .unwrap();
         });
         stage_cpu("refit", &mut || {
-            prep.refit(&mut rows2, &bands, None).unwrap();
+            prep.refit(&mut rows2, &bands, None, false).unwrap();
         });
         stage_cpu("vanishing", &mut || {
             vs.run(None, &mut d2).unwrap();

@@ -11,6 +11,7 @@ use crate::gige::GigeConfig;
 use crate::pipeline::PipelineOptions;
 use crate::record::RecordOptions;
 use crate::ros2::Ros2Config;
+use crate::source::synthetic::SyntheticDriveOptions;
 use crate::source::Rate;
 use serde::Deserialize;
 use std::fmt;
@@ -60,29 +61,12 @@ impl std::error::Error for ConfigError {}
 /// Where frames come from.
 #[derive(Debug, Clone, PartialEq)]
 pub enum SourceConfig {
-    Synthetic(SyntheticConfig),
+    /// The synthetic drive (`[source.synthetic]`).
+    Synthetic(SyntheticDriveOptions),
     Replay(ReplayConfig),
     /// A GigE Vision camera through Aravis, configured by `[gige]` (needs the `camera`
     /// feature at run time; the configuration is checked on every build).
     Camera(GigeConfig),
-}
-
-/// The synthetic drive.
-#[derive(Debug, Clone, PartialEq)]
-pub struct SyntheticConfig {
-    pub fps: f64,
-    pub width: u32,
-    pub height: u32,
-    pub lens: Lens,
-    pub colour: bool,
-    pub seed: u64,
-    /// Forward speed along the rows, m/s.
-    pub speed_mps: f64,
-    /// Amplitude and period of the slowly varying heading, pitch and lateral offset.
-    pub heading_amplitude_deg: f64,
-    pub pitch_amplitude_deg: f64,
-    pub offset_amplitude_m: f64,
-    pub period_s: f64,
 }
 
 /// The ideal lenses omnirow ships.
@@ -162,7 +146,10 @@ pub struct Config {
     pub multicast_interface: Ipv4Addr,
     pub stdout: StdoutMode,
     pub http: Option<SocketAddr>,
+    /// Recording, when `[record] enabled = true`.
     pub record: Option<RecordOptions>,
+    /// The `[record]` settings whether enabled or not (what `omnirow record` uses).
+    pub record_options: RecordOptions,
     pub log_format: LogFormat,
     pub log_level: String,
     /// The detector's options (`[detector]`, see `omnirow detect`).
@@ -281,6 +268,7 @@ struct RawRecord {
     rotate_s: S<f64>,
     reserve_mb: S<i64>,
     sync_interval_ms: S<i64>,
+    json_channels: S<crate::record::JsonChannels>,
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -479,7 +467,7 @@ fn validate(raw: RawConfig, c: &mut Check) -> Config {
                     }
                 }
             }
-            SourceConfig::Synthetic(SyntheticConfig {
+            SourceConfig::Synthetic(SyntheticDriveOptions {
                 fps: c.range("source.synthetic.fps", &syn.fps, 15.0, 0.1, 1000.0),
                 width,
                 height,
@@ -509,6 +497,7 @@ fn validate(raw: RawConfig, c: &mut Check) -> Config {
                     5.0,
                 ),
                 period_s: c.range("source.synthetic.period_s", &syn.period_s, 20.0, 0.1, 1e6),
+                render_threads: 0,
             })
         }
         SourceKind::Replay => {
@@ -646,7 +635,8 @@ fn validate(raw: RawConfig, c: &mut Check) -> Config {
         None
     };
 
-    let record = if c.get(&rec.enabled, false) {
+    // Checked whether or not [record] is enabled: `omnirow record` uses these settings too.
+    let record_options = {
         let sync_ms = c.range(
             "record.sync_interval_ms",
             &rec.sync_interval_ms,
@@ -664,7 +654,7 @@ fn validate(raw: RawConfig, c: &mut Check) -> Config {
                 );
             }
         }
-        Some(RecordOptions {
+        RecordOptions {
             dir: PathBuf::from(c.get(&rec.dir, "/var/lib/omnirow".to_string())),
             prefix,
             rotate_bytes: c.range("record.rotate_mb", &rec.rotate_mb, 4096, 0, 1 << 30) as u64
@@ -682,10 +672,10 @@ fn validate(raw: RawConfig, c: &mut Check) -> Config {
             frames: c.get(&rec.frames, true),
             frame_id: c.get(&cam.frame_id, "omnirow_camera".to_string()),
             calibration_toml: None,
-        })
-    } else {
-        None
+            json_channels: c.get(&rec.json_channels, crate::record::JsonChannels::Json),
+        }
     };
+    let record = c.get(&rec.enabled, false).then(|| record_options.clone());
 
     let log_level = c.get(&log.level, "info".to_string());
     if let Some(s) = &log.level {
@@ -745,6 +735,7 @@ fn validate(raw: RawConfig, c: &mut Check) -> Config {
         stdout: c.get(&publ.stdout, StdoutMode::Auto),
         http: http_addr,
         record,
+        record_options,
         log_format: c.get(&log.format, LogFormat::Human),
         log_level,
         detector,

@@ -208,3 +208,126 @@ fn shared_dir() -> std::path::PathBuf {
             Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../shared")).to_path_buf()
         })
 }
+
+/// Diagnostic (not a guard): per detected row, its error against the nearest true row,
+/// split into the part that moves the vanishing point (the normal's component along the
+/// true direction) and the rest. `cargo test --release --test detect_accuracy row_errors -- --ignored --nocapture`
+#[test]
+#[ignore]
+fn table1_row_errors() {
+    let n: u64 = std::env::var("OMNIROW_TABLE1_IMAGES")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(10);
+    for (name, cal) in [
+        ("fisheye", ideal_fisheye(2050, 2448)),
+        ("pal", ideal_pal(2050, 2448)),
+    ] {
+        let mut renderer = Renderer::new(&cal).unwrap();
+        let opts: DetectorOptions = match std::env::var("OMNIROW_DETECT_OPTS") {
+            Ok(t) => toml::from_str(&t).unwrap(),
+            Err(_) => DetectorOptions {
+                method: Method::Hough,
+                ..DetectorOptions::default()
+            },
+        };
+        let mut det = Detector::new(&cal, opts).unwrap();
+        let mut out = Detection::default();
+        let mut buf = Vec::new();
+        let mut errs = Vec::new();
+        // (lateral bucket) -> (sum e^2, count, sum e)
+        let mut by_lat: std::collections::BTreeMap<i64, (f64, usize, f64)> = Default::default();
+        let mut alt = [0.0f64; 4];
+        for seed in 1000..1000 + n {
+            let mut o = random_scene(seed, Protocol::Table1);
+            if let Some(v) = std::env::var("OMNIROW_NOISE")
+                .ok()
+                .and_then(|v| v.parse().ok())
+            {
+                o.noise = v;
+            }
+            let scene = Scene::new(&o, seed, &cal.mounting).unwrap();
+            buf.resize(renderer.buffer_len(Style::Grey), 0);
+            renderer.render_into(&scene, &mut buf).unwrap();
+            let (w, h) = renderer.size();
+            let view = ImageView::new(w, h, Style::Grey.pixel_format(), &buf).unwrap();
+            det.process(&view, &mut out).unwrap();
+            let truth = omnirow::synth::GroundTruth::of_scene(&scene, &cal);
+            let t = nalgebra::Vector3::from(truth.vp_along);
+            let vp_err = out
+                .vanishing_point
+                .map(|v| axis_angle(&v.direction, &t) * 1e3);
+            errs.push(vp_err.unwrap_or(f64::NAN));
+            println!(
+                "{name} seed {seed} yaw {:.1} pitch {:.1} lat {:.3}: VP err {:?} mrad, {} rows",
+                o.yaw_deg,
+                o.pitch_deg,
+                o.lateral_m,
+                vp_err,
+                out.rows.len()
+            );
+            let mut rows = Vec::new();
+            for r in &out.rows {
+                let (k, d) = truth
+                    .row_normals
+                    .iter()
+                    .enumerate()
+                    .map(|(k, tn)| (k, axis_angle(&r.normal, &nalgebra::Vector3::from(*tn))))
+                    .min_by(|a, b| a.1.total_cmp(&b.1))
+                    .unwrap();
+                let e = r.normal.dot(&t).asin();
+                let lat = truth.row_lateral_m[k];
+                println!(
+                    "   row lat {:+.2} support {:5} err {:.4} mrad, along-VP {:+.4} mrad",
+                    lat,
+                    r.support,
+                    d * 1e3,
+                    e * 1e3
+                );
+                if d < 2e-3 {
+                    let b = by_lat.entry((lat.abs() / 0.5).round() as i64).or_default();
+                    b.0 += e * e;
+                    b.1 += 1;
+                    b.2 += e.abs();
+                    rows.push((r.normal, r.support as f64, lat));
+                }
+            }
+            // Alternative weightings of the same rows.
+            let fit = |wf: &dyn Fn(f64, f64) -> f64| {
+                let mut m = nalgebra::Matrix3::<f64>::zeros();
+                for (nn, s, lat) in &rows {
+                    m += wf(*s, *lat) * nn * nn.transpose();
+                }
+                let e = m.symmetric_eigen();
+                let i = e.eigenvalues.imin();
+                let v: nalgebra::Vector3<f64> = e.eigenvectors.column(i).into();
+                axis_angle(&v, &t) * 1e3
+            };
+            let a = [
+                fit(&|s, _| s),
+                fit(&|_, _| 1.0),
+                fit(&|s, l| s / (1.0 + l * l)),
+                fit(&|_, l| if l.abs() < 1.0 { 1.0 } else { 0.0 }),
+            ];
+            println!("   alt fits (support, equal, support/(1+lat²), |lat|<1): {a:.4?}");
+            for (x, y) in alt.iter_mut().zip(a) {
+                *x += y / n as f64;
+            }
+        }
+        for (b, (s2, c, s1)) in &by_lat {
+            println!(
+                "{name} |lat|≈{:.1} m: {c} rows, along-VP rms {:.4} mrad, mean abs {:.4}",
+                *b as f64 * 0.5,
+                (s2 / *c as f64).sqrt() * 1e3,
+                s1 / *c as f64 * 1e3
+            );
+        }
+        println!("{name} mean VP err of alt fits: {alt:.4?}");
+        println!(
+            "{name} SUMMARY: VP err mean {:.4} max {:.4} mrad over {} images",
+            errs.iter().sum::<f64>() / errs.len() as f64,
+            errs.iter().copied().fold(0.0, f64::max),
+            errs.len()
+        );
+    }
+}

@@ -127,3 +127,75 @@ fn the_checker_rejects_what_ros2_would_reject() {
     );
     assert!(String::from_utf8_lossy(&out.stdout).contains("self-test: ok"));
 }
+
+/// With `record.json_channels = "ros2_string"` every channel is a ROS 2 type, so rosbags'
+/// own high-level reader opens the file as it is (no tolerance) and decodes the estimates.
+#[test]
+fn ros2_string_recordings_open_in_rosbags_unchanged() {
+    use omnirow::estimate::{Estimate, Status};
+    use omnirow::record::JsonChannels;
+    let Some(venv) = venv::venv("rosbags") else {
+        return;
+    };
+    let dir = std::env::temp_dir().join(format!("omnirow-ros2-string-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let mut rec = Recorder::new(RecordOptions {
+        dir: dir.clone(),
+        reserve_bytes: 0,
+        json_channels: JsonChannels::Ros2String,
+        ..RecordOptions::default()
+    })
+    .unwrap();
+    for i in 0..3 {
+        let f = frame(i, 8, 6, PixelFormat::Mono8);
+        rec.write_frame(&f).unwrap();
+        let mut e = Estimate::empty(&f, Status::NoRows);
+        e.quality = 0.25 * i as f64;
+        rec.write_estimate(&e).unwrap();
+    }
+    rec.finish().unwrap();
+    let path = rec.files()[0].clone();
+    let script = r#"
+import json, sys
+from pathlib import Path
+from rosbags.highlevel import AnyReader
+with AnyReader([Path(sys.argv[1])]) as r:
+    for con, t, raw in r.messages():
+        m = r.deserialize(raw, con.msgtype)
+        if con.msgtype == "std_msgs/msg/String":
+            print(json.dumps({"topic": con.topic, "json": json.loads(m.data)}))
+        else:
+            print(json.dumps({"topic": con.topic, "type": con.msgtype, "size": [m.width, m.height]}))
+"#;
+    let out = Command::new(venv.join("bin/python"))
+        .args(["-c", script])
+        .arg(&path)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "rosbags could not read {}:\n{}",
+        path.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let lines: Vec<Value> = String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let images = lines
+        .iter()
+        .filter(|v| v["topic"] == "/omnirow/image_raw")
+        .count();
+    assert_eq!(images, 3);
+    let est: Vec<&Value> = lines
+        .iter()
+        .filter(|v| v["topic"] == "/omnirow/estimate")
+        .collect();
+    assert_eq!(est.len(), 3);
+    for (i, e) in est.iter().enumerate() {
+        assert_eq!(e["json"]["seq"].as_u64(), Some(i as u64));
+        assert_eq!(e["json"]["status"], "no_rows");
+        assert_eq!(e["json"]["quality"].as_f64(), Some(0.25 * i as f64));
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

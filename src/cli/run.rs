@@ -21,7 +21,7 @@ use crate::publish::Publisher;
 use crate::record::Recorder;
 use crate::source::folder::{FolderOptions, FolderReplay};
 use crate::source::mcap_replay::{McapReplay, McapReplayOptions};
-use crate::source::synthetic::{SyntheticDrive, SyntheticDriveOptions};
+use crate::source::synthetic::SyntheticDrive;
 use crate::source::{Rate, Source, SourceState};
 use anyhow::{bail, Context};
 use clap::Args;
@@ -220,7 +220,7 @@ impl Processor for DetectorWorker {
 pub fn run(args: RunArgs, record_to: Option<PathBuf>) -> anyhow::Result<ExitCode> {
     let mut cfg = configure(&args)?;
     if let Some(dir) = record_to {
-        let mut rec = cfg.record.clone().unwrap_or_default();
+        let mut rec = cfg.record_options.clone();
         rec.dir = dir;
         rec.frame_id = cfg.frame_id.clone();
         cfg.record = Some(rec);
@@ -229,10 +229,9 @@ pub fn run(args: RunArgs, record_to: Option<PathBuf>) -> anyhow::Result<ExitCode
 
     // Source (opened now, so a missing file is an error before anything starts).
     let source: Box<dyn Source> = match &cfg.source {
-        SourceConfig::Synthetic(s) => Box::new(
-            SyntheticDrive::new(SyntheticDriveOptions::from_config(s))
-                .context("synthetic drive")?,
-        ),
+        SourceConfig::Synthetic(s) => {
+            Box::new(SyntheticDrive::new(s.clone()).context("synthetic drive")?)
+        }
         SourceConfig::Replay(r) if r.path.is_dir() => {
             Box::new(FolderReplay::open(FolderOptions {
                 dir: r.path.clone(),

@@ -399,12 +399,14 @@ impl Preparer {
     /// Refits rows (with the Hough bands they were fitted in) on every pixel of the last
     /// image near them, weighted by intensity above the background (see [`super::refit`]).
     /// Returns the number of rows refitted.
-    /// With the rows' vanishing point `vp`, also removes each row's perspective bias.
+    /// With the rows' vanishing point `vp` (an estimate), each row's band narrows towards
+    /// it; with `perspective` too, each row's perspective bias is removed.
     pub fn refit(
         &self,
         rows: &mut [Row],
         bands: &[f64],
         vp: Option<&Vector3<f64>>,
+        perspective: bool,
     ) -> Result<usize, DetectError> {
         let Some(s) = &self.setup else {
             return Ok(0);
@@ -422,6 +424,7 @@ impl Preparer {
             solid: &s.solid,
             tiles: &s.tiles,
             pixel_angle: s.pixel_angle,
+            model: &s.work_cal.model,
         };
         refit_rows(
             &img,
@@ -429,6 +432,7 @@ impl Preparer {
             rows,
             bands,
             vp,
+            perspective,
             &self.opts.refit,
         )
     }
@@ -583,7 +587,15 @@ impl Detector {
             self.last_hough =
                 self.hough
                     .find_rows(&self.points.rays, &self.points.weights, &mut out.rows)?;
-            self.prep.refit(&mut out.rows, self.hough.bands(), None)?;
+            // A first vanishing point from the Hough rows shapes the refit's bands.
+            let vp = if self.opts.refit.enabled && self.opts.refit.wedge {
+                self.vanish.run(None, out)?;
+                out.vanishing_point.map(|v| v.direction)
+            } else {
+                None
+            };
+            self.prep
+                .refit(&mut out.rows, self.hough.bands(), vp.as_ref(), false)?;
         }
         let n_hough = out.rows.len();
         let t2 = Instant::now();
@@ -617,6 +629,7 @@ impl Detector {
                     &mut out.rows[..n_hough],
                     self.hough.bands(),
                     Some(&vp.direction),
+                    true,
                 )?;
                 self.vanish.run(Some(&self.weights), out)?;
             }

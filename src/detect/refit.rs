@@ -8,8 +8,10 @@
 //! pixels); the soft, anti-aliased edges carry the missing sub-pixel information. Pixels are
 //! visited by tiles: a tile is scanned only when its cone of rays meets the row's band.
 
+use super::hough::fast_atan2;
 use super::{DetectError, Row};
-use crate::sphere::{canonical, Scatter};
+use crate::camera::OcamModel;
+use crate::sphere::{any_perpendicular, canonical, Scatter};
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
@@ -27,6 +29,17 @@ pub struct RefitOptions {
     /// Once the vanishing point is known, refit again removing each row's perspective
     /// bias, and find the vanishing point again.
     pub perspective: bool,
+    /// Use only the stretches of a row whose whole cross-section (the band on both sides of
+    /// the great circle) lies inside the valid mask. Where a mask edge (the annulus of a
+    /// catadioptric lens, the sky line) crosses a wide row obliquely, the part of the row it
+    /// cuts off on one side would otherwise pull the fitted centre line towards the other.
+    pub full_sections: bool,
+    /// Given a vanishing point, narrow each row's band towards it (see [`refit_rows`]).
+    pub wedge: bool,
+    /// With the wedge: after each iteration the band's half-width at the row's foot becomes
+    /// this many times the RMS of the row's scaled offsets (never wider than before);
+    /// 0 keeps the Hough band.
+    pub band_rms_factor: f64,
 }
 
 impl Default for RefitOptions {
@@ -37,6 +50,9 @@ impl Default for RefitOptions {
             background_fraction: 0.25,
             margin_px: 1.5,
             perspective: false,
+            full_sections: true,
+            wedge: true,
+            band_rms_factor: 2.0,
         }
     }
 }
@@ -140,13 +156,79 @@ pub struct RefitImage<'a> {
     pub tiles: &'a Tiles,
     /// Angle (radians) covered by one pixel near the image centre.
     pub pixel_angle: f64,
+    /// The camera model at the working resolution (to check which stretches of a row's band
+    /// lie inside the mask).
+    pub model: &'a OcamModel,
+}
+
+/// Samples around a row's great circle at which its cross-section is checked.
+const SECTION_SAMPLES: usize = 256;
+
+impl RefitImage<'_> {
+    /// Whether the ray `q` (unit) lands on a valid pixel: the pixel the model's inverse
+    /// polynomial gives must be valid and its own ray within two pixels of `q` (which also
+    /// rejects rays beyond the range the polynomial describes).
+    fn valid(&self, q: &Vector3<f64>) -> bool {
+        let t = self.tiles;
+        let [r, c] = self.model.world2cam_invpol(q);
+        if !(r > -0.5 && c > -0.5) {
+            return false;
+        }
+        let (r, c) = ((r + 0.5) as usize, (c + 0.5) as usize);
+        if r >= t.height || c >= t.width {
+            return false;
+        }
+        let i = r * t.width + c;
+        if self.mask[i] == 0 {
+            return false;
+        }
+        let p = self.rays[i];
+        let d = q.x * p[0] as f64 + q.y * p[1] as f64 + q.z * p[2] as f64;
+        d > (2.0 * self.pixel_angle).cos()
+    }
+
+    /// Marks, at `SECTION_SAMPLES` angles s around the great circle of `n` (points
+    /// e1 cos s + e2 sin s), whether the circle's cross-section lies inside the mask (its
+    /// centre and both ends valid). The cross-section's half-width is `foot_band` + `margin`,
+    /// or with a vanishing point `vp`, `foot_band`·sin(angle from `vp`) + `margin`.
+    #[allow(clippy::too_many_arguments)]
+    fn full_sections(
+        &self,
+        n: &Vector3<f64>,
+        e1: &Vector3<f64>,
+        e2: &Vector3<f64>,
+        foot_band: f64,
+        margin: f64,
+        vp: Option<&Vector3<f64>>,
+        out: &mut [bool; SECTION_SAMPLES],
+    ) {
+        for (k, o) in out.iter_mut().enumerate() {
+            let s = k as f64 * std::f64::consts::TAU / SECTION_SAMPLES as f64;
+            let q = e1 * s.cos() + e2 * s.sin();
+            let band = match vp {
+                Some(v) => foot_band * q.cross(v).norm() + margin,
+                None => foot_band + margin,
+            };
+            let (sb, cb) = band.sin_cos();
+            *o = self.valid(&q) && self.valid(&(q * cb + n * sb)) && self.valid(&(q * cb - n * sb));
+        }
+    }
 }
 
 /// Refits each row's normal on the image's pixels within its band (`bands[i]`, radians,
 /// widened by the margin); `background` is the level below which pixels weigh nothing.
 /// Rows whose refit fails keep their normal. Returns the number of rows refitted.
 ///
-/// With the rows' vanishing point `vp`, each fit also removes the perspective bias of a
+/// With the rows' vanishing point `vp` (an estimate is enough), the band is a wedge: a row
+/// is a strip on the ground, so its image narrows towards the vanishing point as
+/// sin(angle from it), and so does the gap to its neighbours, which all meet there. A band
+/// of constant width would take in the neighbours' pixels near the vanishing point, and
+/// pixels there move the fitted circle off the vanishing point (near its foot, pixels only
+/// turn it about the vanishing point, which does no harm). The wedge keeps the row's
+/// `bands[i]` at its foot (the point 90° from the vanishing point), narrows in proportion,
+/// and keeps the pixel margin everywhere.
+///
+/// With `perspective` (and `vp`), each fit also removes the perspective bias of a
 /// row that is a strip on the ground: the near half of the strip looks wider than the far
 /// half, so its image is off its centre line by A·cos³ s, with s the angle along the great
 /// circle from the row's foot (the point 90° from the vanishing point) and A unknown per row.
@@ -157,6 +239,7 @@ pub fn refit_rows(
     rows: &mut [Row],
     bands: &[f64],
     vp: Option<&Vector3<f64>>,
+    perspective: bool,
     opts: &RefitOptions,
 ) -> Result<usize, DetectError> {
     if rows.len() != bands.len() {
@@ -178,17 +261,37 @@ pub fn refit_rows(
             t.height, t.width
         )));
     }
+    let margin = opts.margin_px * img.pixel_angle;
+    let wedge = vp.filter(|_| opts.wedge);
+    let vf = wedge.map_or([0f32; 3], |v| [v.x as f32, v.y as f32, v.z as f32]);
     let mut done = 0;
-    for (row, &band) in rows.iter_mut().zip(bands) {
-        let band = band + opts.margin_px * img.pixel_angle;
-        let s_band = band.min(1.5).sin() as f32;
+    for (row, &hough_band) in rows.iter_mut().zip(bands) {
+        let mut foot_band = hough_band;
         let mut n = row.normal;
         let mut ok = false;
+        let mut sections = [true; SECTION_SAMPLES];
         for _ in 0..opts.iterations {
+            let band = foot_band + margin;
+            let s_band = band.min(1.5).sin() as f32;
+            let (s_foot, s_margin) = (foot_band.min(1.5).sin() as f32, margin.sin() as f32);
+            // Weighted second moment of the offsets scaled to the foot (wedge only).
+            let (mut su2, mut sw) = (0f64, 0f64);
             let nf = [n.x as f32, n.y as f32, n.z as f32];
+            // The circle's own frame: s = atan2(f2·p, f1·p) is the same for a pixel and its
+            // mirror image across the circle, so a stretch is kept or dropped whole.
+            let f1 = any_perpendicular(&n);
+            let f2 = n.cross(&f1);
+            if opts.full_sections {
+                img.full_sections(&n, &f1, &f2, foot_band, margin, wedge, &mut sections);
+            }
+            let (f1f, f2f) = (
+                [f1.x as f32, f1.y as f32, f1.z as f32],
+                [f2.x as f32, f2.y as f32, f2.z as f32],
+            );
+            let ks = SECTION_SAMPLES as f32 / std::f32::consts::TAU;
             let mut sc = Scatter::new();
             // Normal equations of the biased model: features (e1·p, e2·p, −(f·p)³), target −n·p.
-            let basis = vp.map(|v| {
+            let basis = vp.filter(|_| perspective).map(|v| {
                 let e2 = (v - n * n.dot(v)).normalize();
                 let e1 = n.cross(&e2);
                 (e1, e2)
@@ -211,11 +314,36 @@ pub fn refit_rows(
                             continue;
                         }
                         let p = img.rays[i];
-                        let d = nf[0] * p[0] + nf[1] * p[1] + nf[2] * p[2];
-                        if d.abs() >= s_band {
+                        let d = (nf[0] * p[0] + nf[1] * p[1] + nf[2] * p[2]).abs();
+                        if d >= s_band {
                             continue;
                         }
+                        let mut c = 1.0;
+                        if wedge.is_some() {
+                            let a = vf[0] * p[0] + vf[1] * p[1] + vf[2] * p[2];
+                            c = (1.0 - a * a).max(0.0).sqrt();
+                            if d >= s_foot * c + s_margin {
+                                continue;
+                            }
+                        }
+                        if opts.full_sections {
+                            let a = fast_atan2(
+                                f2f[0] * p[0] + f2f[1] * p[1] + f2f[2] * p[2],
+                                f1f[0] * p[0] + f1f[1] * p[1] + f1f[2] * p[2],
+                            );
+                            let k = ((a * ks + 0.5).floor() as isize)
+                                .rem_euclid(SECTION_SAMPLES as isize)
+                                as usize;
+                            if !sections[k] {
+                                continue;
+                            }
+                        }
                         let w = (v - background) as f64 * img.solid[i] as f64;
+                        if wedge.is_some() && c > 0.2 {
+                            let u = (d / c) as f64;
+                            su2 += w * u * u;
+                            sw += w;
+                        }
                         let pv = Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64);
                         if let Some((e1, e2)) = basis {
                             let g = e1.dot(&pv);
@@ -248,6 +376,13 @@ pub fn refit_rows(
                     ok = true;
                 }
                 _ => break,
+            }
+            // Within the wedge the row's half-width at its foot is about √3 × the RMS of
+            // the scaled offsets (a uniform strip): narrow the band to it (never widen),
+            // so that fewer background pixels (noise) weigh in.
+            if wedge.is_some() && sw > 0.0 && opts.band_rms_factor > 0.0 {
+                let rms = (su2 / sw).sqrt().asin();
+                foot_band = (opts.band_rms_factor * rms).min(foot_band);
             }
         }
         if ok {
@@ -311,6 +446,7 @@ mod tests {
             solid: &solid,
             tiles: &tiles,
             pixel_angle: 0.0135,
+            model: &cal.model,
         };
         // start 5 mrad off
         let start = (truth + Vector3::new(0.0, 0.0, 0.005)).normalize();
@@ -319,7 +455,16 @@ mod tests {
             method: Method::Hough,
             support: 100,
         }];
-        let n = refit_rows(&img, 10, &mut rows, &[0.05], None, &RefitOptions::default()).unwrap();
+        let n = refit_rows(
+            &img,
+            10,
+            &mut rows,
+            &[0.05],
+            None,
+            false,
+            &RefitOptions::default(),
+        )
+        .unwrap();
         assert_eq!(n, 1);
         let err = axis_angle(&rows[0].normal, &truth);
         assert!(
@@ -327,6 +472,15 @@ mod tests {
             "error {err} rad (start {})",
             axis_angle(&start, &truth)
         );
-        assert!(refit_rows(&img, 10, &mut rows, &[], None, &RefitOptions::default()).is_err());
+        assert!(refit_rows(
+            &img,
+            10,
+            &mut rows,
+            &[],
+            None,
+            false,
+            &RefitOptions::default()
+        )
+        .is_err());
     }
 }

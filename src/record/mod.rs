@@ -2,7 +2,10 @@
 //!
 //! Owns the [`Recorder`]: frames go on `/omnirow/image_raw` as `sensor_msgs/msg/Image` in CDR
 //! (schema: the ROS 2 message definition, encoding `ros2msg`), estimates on
-//! `/omnirow/estimate` as JSON, and synthetic ground truth on `/omnirow/ground_truth` as JSON.
+//! `/omnirow/estimate` as JSON, and synthetic ground truth on `/omnirow/ground_truth` as JSON
+//! (with a JSON schema, which Foxglove plots field by field; or, with [`JsonChannels::Ros2String`],
+//! the same JSON text inside `std_msgs/msg/String`, so that every channel is ROS 2 and rosbags
+//! and `ros2 bag` open the file, as they refuse non-ROS channels).
 //! Every frame closes its chunk and hands it to the OS; the file is synced to disk at least
 //! every `sync_interval`, so a power cut loses at most that much. Files rotate by size or
 //! duration, and recording stops (detection goes on) when free space would fall below the
@@ -30,6 +33,51 @@ pub const CALIBRATION_ATTACHMENT: &str = "calibration.toml";
 
 /// A JSON schema (draft 2020-12, as Foxglove reads it) for the estimate channel.
 pub const ESTIMATE_JSON_SCHEMA: &str = r#"{"title":"omnirow.Estimate","type":"object","properties":{"schema_version":{"type":"integer"},"seq":{"type":"integer"},"capture_ns":{"type":"integer"},"receive_ns":{"type":"integer"},"publish_ns":{"type":"integer"},"latency_ms":{"type":"number"},"detector_ms":{"type":"number"},"status":{"type":"string","enum":["ok","degraded","no_rows","no_vanishing_point","camera_lost","error"]},"heading_rad":{"type":["number","null"]},"tilt_rad":{"type":["number","null"]},"vanishing_point":{"type":["array","null"],"items":{"type":"number"}},"rows":{"type":"array","items":{"type":"object","properties":{"normal":{"type":"array","items":{"type":"number"}},"method":{"type":"string"},"support":{"type":"integer"}}}},"quality":{"type":"number"},"error":{"type":"string"},"truth":{"type":"object"}}}"#;
+
+/// How the estimate and ground-truth channels are written.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum JsonChannels {
+    /// JSON messages with a JSON schema (`jsonschema`/`json`): Foxglove plots every field.
+    #[default]
+    Json,
+    /// The same JSON text as `std_msgs/msg/String` in CDR (`ros2msg`/`cdr`): every channel
+    /// of the file is then a ROS 2 type, as rosbags and `ros2 bag` require.
+    Ros2String,
+}
+
+/// ROS 2 message definition of `std_msgs/msg/String`.
+pub const ROS2_STRING_SCHEMA: &str = "string data\n";
+
+/// Encodes `text` as a CDR `std_msgs/msg/String` (little-endian encapsulation, length with
+/// the terminating NUL) into `out`.
+pub fn encode_ros2_string(out: &mut Vec<u8>, text: &[u8]) {
+    out.clear();
+    out.extend_from_slice(&[0, 1, 0, 0]);
+    out.extend_from_slice(&(text.len() as u32 + 1).to_le_bytes());
+    out.extend_from_slice(text);
+    out.push(0);
+}
+
+/// The text of a CDR `std_msgs/msg/String`, or `None` if `data` is not one.
+pub fn decode_ros2_string(data: &[u8]) -> Option<&[u8]> {
+    let little = match data.get(..2)? {
+        [0, 1] => true,
+        [0, 0] => false,
+        _ => return None,
+    };
+    let len: [u8; 4] = data.get(4..8)?.try_into().ok()?;
+    let len = if little {
+        u32::from_le_bytes(len)
+    } else {
+        u32::from_be_bytes(len)
+    } as usize;
+    let body = data.get(8..8usize.checked_add(len)?)?;
+    match body.split_last() {
+        Some((0, text)) => Some(text),
+        _ => None,
+    }
+}
 
 /// Errors of the recorder.
 #[derive(Debug, thiserror::Error)]
@@ -73,6 +121,8 @@ pub struct RecordOptions {
     /// The calibration the frames go with (omnirow TOML), attached to every file as
     /// `calibration.toml` so that a recording replays with its own calibration.
     pub calibration_toml: Option<String>,
+    /// Encoding of the estimate and ground-truth channels.
+    pub json_channels: JsonChannels,
 }
 
 impl Default for RecordOptions {
@@ -87,6 +137,7 @@ impl Default for RecordOptions {
             frames: true,
             frame_id: "omnirow_camera".into(),
             calibration_toml: None,
+            json_channels: JsonChannels::Json,
         }
     }
 }
@@ -226,26 +277,49 @@ impl Recorder {
         let image_ch = writer
             .add_channel(img_schema, IMAGE_TOPIC, "cdr", &meta)
             .map_err(mc)?;
-        let est_schema = writer
-            .add_schema(
-                "omnirow.Estimate",
-                "jsonschema",
-                ESTIMATE_JSON_SCHEMA.as_bytes(),
-            )
-            .map_err(mc)?;
-        let estimate_ch = writer
-            .add_channel(est_schema, ESTIMATE_TOPIC, "json", &none)
-            .map_err(mc)?;
-        let truth_schema = writer
-            .add_schema(
-                "omnirow.GroundTruth",
-                "jsonschema",
-                br#"{"title":"omnirow.GroundTruth","type":"object"}"#,
-            )
-            .map_err(mc)?;
-        let truth_ch = writer
-            .add_channel(truth_schema, TRUTH_TOPIC, "json", &none)
-            .map_err(mc)?;
+        let (estimate_ch, truth_ch) = match self.opts.json_channels {
+            JsonChannels::Json => {
+                let est_schema = writer
+                    .add_schema(
+                        "omnirow.Estimate",
+                        "jsonschema",
+                        ESTIMATE_JSON_SCHEMA.as_bytes(),
+                    )
+                    .map_err(mc)?;
+                let truth_schema = writer
+                    .add_schema(
+                        "omnirow.GroundTruth",
+                        "jsonschema",
+                        br#"{"title":"omnirow.GroundTruth","type":"object"}"#,
+                    )
+                    .map_err(mc)?;
+                (
+                    writer
+                        .add_channel(est_schema, ESTIMATE_TOPIC, "json", &none)
+                        .map_err(mc)?,
+                    writer
+                        .add_channel(truth_schema, TRUTH_TOPIC, "json", &none)
+                        .map_err(mc)?,
+                )
+            }
+            JsonChannels::Ros2String => {
+                let schema = writer
+                    .add_schema(
+                        "std_msgs/msg/String",
+                        "ros2msg",
+                        ROS2_STRING_SCHEMA.as_bytes(),
+                    )
+                    .map_err(mc)?;
+                (
+                    writer
+                        .add_channel(schema, ESTIMATE_TOPIC, "cdr", &meta)
+                        .map_err(mc)?,
+                    writer
+                        .add_channel(schema, TRUTH_TOPIC, "cdr", &meta)
+                        .map_err(mc)?,
+                )
+            }
+        };
         tracing::info!(file = %path.display(), "recording");
         self.files.push(path.clone());
         self.state = RecordState::Recording(path.clone());
@@ -289,7 +363,11 @@ impl Recorder {
             source,
         };
         if let Some(t) = &frame.truth {
-            let json = serde_json::to_vec(&**t).unwrap_or_default();
+            let mut json = serde_json::to_vec(&**t).unwrap_or_default();
+            if self.opts.json_channels == JsonChannels::Ros2String {
+                encode_ros2_string(&mut self.scratch, &json);
+                std::mem::swap(&mut json, &mut self.scratch);
+            }
             let header = mcap::records::MessageHeader {
                 channel_id: f.truth_ch,
                 sequence: f.image_seq,
@@ -334,7 +412,15 @@ impl Recorder {
         let Some(f) = self.file.as_mut() else {
             return Ok(());
         };
-        let json = e.to_json();
+        let text = e.to_json();
+        let json = match self.opts.json_channels {
+            JsonChannels::Json => text.into_bytes(),
+            JsonChannels::Ros2String => {
+                let mut v = Vec::with_capacity(text.len() + 9);
+                encode_ros2_string(&mut v, text.as_bytes());
+                v
+            }
+        };
         let header = mcap::records::MessageHeader {
             channel_id: f.estimate_ch,
             sequence: f.estimate_seq,
@@ -343,7 +429,7 @@ impl Recorder {
         };
         f.estimate_seq = f.estimate_seq.wrapping_add(1);
         f.writer
-            .write_to_known_channel(&header, json.as_bytes())
+            .write_to_known_channel(&header, &json)
             .map_err(|source| RecordError::Mcap {
                 path: f.path.clone(),
                 source,
@@ -493,6 +579,23 @@ fn utc_stamp(ns: u64) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn ros2_string_round_trips_and_rejects_garbage() {
+        let mut v = Vec::new();
+        encode_ros2_string(&mut v, br#"{"seq":3}"#);
+        assert_eq!(&v[..8], &[0, 1, 0, 0, 10, 0, 0, 0]);
+        assert_eq!(decode_ros2_string(&v), Some(&br#"{"seq":3}"#[..]));
+        encode_ros2_string(&mut v, b"");
+        assert_eq!(decode_ros2_string(&v), Some(&b""[..]));
+        assert_eq!(decode_ros2_string(&v[..7]), None);
+        assert_eq!(decode_ros2_string(&[0, 1, 0, 0, 255, 255, 255, 255]), None);
+        assert_eq!(
+            decode_ros2_string(&[0, 1, 0, 0, 2, 0, 0, 0, b'a', b'b']),
+            None
+        );
+        assert_eq!(decode_ros2_string(&[7, 7, 0, 0]), None);
+    }
 
     #[test]
     fn utc_stamp_known_dates() {

@@ -5,7 +5,9 @@
 
 use super::{Poll, Source, SourceError, SourceState};
 use crate::frame::Frame;
-use crate::gige::{CameraState, FrameSink, GigeConfig, GigeCounters, GigeError, GigeSource};
+use crate::gige::{
+    CameraState, FrameSink, GigeConfig, GigeCounters, GigeError, GigeSource, OnConnect,
+};
 use crossbeam_channel::{Receiver, RecvTimeoutError};
 use std::sync::Arc;
 use std::time::Duration;
@@ -22,12 +24,22 @@ impl CameraSource {
     /// Starts acquisition with `cfg`; `queue` frames may wait for the pipeline (at least 1).
     /// Returns at once: the camera may still be connecting (state `starting`).
     pub fn start(cfg: GigeConfig, queue: usize) -> Result<Self, GigeError> {
+        Self::start_with(cfg, queue, None)
+    }
+
+    /// [`CameraSource::start`] with a hook run on the camera after each (re)connection (see
+    /// [`GigeSource::start_with`]).
+    pub fn start_with(
+        cfg: GigeConfig,
+        queue: usize,
+        on_connect: Option<OnConnect>,
+    ) -> Result<Self, GigeError> {
         let name = match &cfg.camera {
             Some(c) => format!("GigE camera {c}"),
             None => "GigE camera (first found)".to_string(),
         };
         let (tx, rx) = crossbeam_channel::bounded(queue.max(1));
-        let camera = GigeSource::start(cfg, FrameSink::Channel(tx))?;
+        let camera = GigeSource::start_with(cfg, FrameSink::Channel(tx), on_connect)?;
         let counters = camera.counters();
         Ok(CameraSource {
             camera,

@@ -48,6 +48,8 @@ pub struct McapReplay {
     schemas: HashMap<u16, (String, String)>,
     image_channel: Option<(u16, Codec)>,
     truth_channel: Option<u16>,
+    /// The truth channel holds JSON inside `std_msgs/msg/String` (record.json_channels).
+    truth_in_string: bool,
     truths: VecDeque<(u64, Arc<GroundTruth>)>,
     pacer: Pacer,
     pending: Option<(u64, Frame)>,
@@ -91,6 +93,7 @@ impl McapReplay {
             schemas: HashMap::new(),
             image_channel: None,
             truth_channel: None,
+            truth_in_string: false,
             truths: VecDeque::new(),
             pending: None,
             seq: 0,
@@ -182,6 +185,7 @@ impl McapReplay {
                         Record::Channel(ch) => {
                             if ch.topic == TRUTH_TOPIC {
                                 self.truth_channel = Some(ch.id);
+                                self.truth_in_string = ch.message_encoding == "cdr";
                                 continue;
                             }
                             if self.image_channel.is_some() {
@@ -223,7 +227,12 @@ impl McapReplay {
                         }
                         Record::Message { header, data } => {
                             if Some(header.channel_id) == self.truth_channel {
-                                match serde_json::from_slice::<GroundTruth>(&data) {
+                                let json = if self.truth_in_string {
+                                    crate::record::decode_ros2_string(&data).unwrap_or(&[])
+                                } else {
+                                    &data[..]
+                                };
+                                match serde_json::from_slice::<GroundTruth>(json) {
                                     Ok(t) => {
                                         self.truths.push_back((header.publish_time, Arc::new(t)));
                                         if self.truths.len() > 64 {

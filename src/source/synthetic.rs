@@ -10,14 +10,14 @@
 
 use super::{Poll, Source, SourceError, SourceState};
 use crate::camera::{Calibration, IdealLens};
-use crate::config::{Lens, SyntheticConfig};
+use crate::config::Lens;
 use crate::frame::{now_ns, Frame};
 use crate::synth::{GroundTruth, Renderer, Scene, Style, SynthError, SynthOptions};
 use std::f64::consts::TAU;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-/// Settings of the drive.
+/// Settings of the drive: `[source.synthetic]` of the node's configuration (validated there).
 #[derive(Debug, Clone, PartialEq)]
 pub struct SyntheticDriveOptions {
     pub fps: f64,
@@ -34,25 +34,6 @@ pub struct SyntheticDriveOptions {
     pub period_s: f64,
     /// Render threads (0: as many as the machine has).
     pub render_threads: usize,
-}
-
-impl SyntheticDriveOptions {
-    pub fn from_config(c: &SyntheticConfig) -> Self {
-        SyntheticDriveOptions {
-            fps: c.fps,
-            width: c.width,
-            height: c.height,
-            lens: c.lens,
-            colour: c.colour,
-            seed: c.seed,
-            speed_mps: c.speed_mps,
-            heading_amplitude_deg: c.heading_amplitude_deg,
-            pitch_amplitude_deg: c.pitch_amplitude_deg,
-            offset_amplitude_m: c.offset_amplitude_m,
-            period_s: c.period_s,
-            render_threads: 0,
-        }
-    }
 }
 
 /// The robot's pose relative to the rows at time `t` seconds: (yaw°, pitch°, lateral m,
