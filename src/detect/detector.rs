@@ -70,8 +70,8 @@ pub struct CombinedOptions {
     /// rows with (1−w)·support. Within (0, 1); default 0.7 as in the paper.
     pub edge_weight: f64,
     /// After the vote, refit the vanishing point over its inlier rows with each method
-    /// weighted by the precision its rows show on the image (see [`super::combine`]).
-    /// Default true.
+    /// weighted by the precision its rows show on the image and each row robustly (see
+    /// [`super::combine`]); applies to the combined and the edge method. Default true.
     pub precision_weighting: bool,
     /// The smallest per-method scatter (mrad) the precision weighting assumes. Default 0.02.
     pub precision_floor_mrad: f64,
@@ -532,6 +532,7 @@ pub struct Detector {
     edge_rows: Vec<Row>,
     weights: Vec<f64>,
     precision_weights: Vec<f64>,
+    precision_scratch: Vec<(f64, f64)>,
     times: StageTimes,
     last_prepare: PrepareResult,
     last_hough: HoughResult,
@@ -567,6 +568,7 @@ impl Detector {
             edge_rows: Vec::with_capacity(64),
             weights: Vec::with_capacity(128),
             precision_weights: Vec::with_capacity(128),
+            precision_scratch: Vec::with_capacity(128),
             times: StageTimes::default(),
             last_prepare: PrepareResult::default(),
             last_hough: HoughResult::default(),
@@ -637,7 +639,7 @@ impl Detector {
                 self.vanish.run(Some(&self.weights), out)?;
             }
         }
-        if method == Method::Combined && self.opts.combined.precision_weighting {
+        if method != Method::Hough && self.opts.combined.precision_weighting {
             self.refit_by_precision(out);
         }
         let t4 = Instant::now();
@@ -664,6 +666,7 @@ impl Detector {
             &vp.direction,
             floor,
             &mut self.precision_weights,
+            &mut self.precision_scratch,
         ) else {
             return;
         };

@@ -115,6 +115,8 @@ pub struct Canny {
     grad: Vec<u16>,
     hist: Vec<u32>,
     stack: Vec<u32>,
+    /// Per row: the columns `lo..hi` holding every mask pixel of the row (empty: none).
+    spans: Vec<(usize, usize)>,
 }
 
 /// Fixed-point scale of the Gaussian weights (they sum to 256).
@@ -134,6 +136,7 @@ impl Canny {
             grad: Vec::new(),
             hist: vec![0; MAX_MAG + 1],
             stack: Vec::new(),
+            spans: Vec::new(),
         })
     }
 
@@ -150,6 +153,7 @@ impl Canny {
             self.acc.resize(width, 0);
         }
         self.grad.resize(n, 0);
+        self.spans.resize(height, (0, 0));
         if self.stack.capacity() < n / 16 {
             self.stack.reserve(n / 16);
         }
@@ -200,15 +204,20 @@ impl Canny {
         } else {
             input
         };
-        sobel(src, width, height, &mut self.grad);
+        // Only the mask's extent is worked on (a lens's image circle leaves a third of the
+        // frame black).
+        for (r, span) in self.spans.iter_mut().enumerate() {
+            *span = row_span(&mask[r * width..(r + 1) * width]);
+        }
+        sobel(src, width, height, &self.spans, &mut self.grad);
         let (low, high) = self.thresholds(width, height, mask);
         let edge_pixels = nms_hysteresis(
             &self.grad,
             width,
             height,
             mask,
-            low,
-            high,
+            &self.spans,
+            (low, high),
             edges,
             &mut self.stack,
         );
@@ -268,8 +277,9 @@ impl Canny {
                 self.hist.fill(0);
                 let mut total = 0u64;
                 for r in (1..height - 1).step_by(3) {
-                    let g = &self.grad[r * width..(r + 1) * width];
-                    let m = &mask[r * width..(r + 1) * width];
+                    let (lo, hi) = self.spans[r];
+                    let g = &self.grad[r * width + lo..r * width + hi];
+                    let m = &mask[r * width + lo..r * width + hi];
                     for (&gv, &mv) in g.iter().zip(m) {
                         if mv != 0 {
                             self.hist[(gv & MAG_MASK) as usize] += 1;
@@ -381,25 +391,65 @@ fn gaussian(
     }
 }
 
+/// The columns `lo..hi` from the first to the last nonzero byte of a mask row ((0, 0) when
+/// the row is all zero), scanning eight bytes at a time.
+fn row_span(m: &[u8]) -> (usize, usize) {
+    let word = |c: &[u8]| u64::from_ne_bytes(c.try_into().unwrap_or([0; 8])) != 0;
+    let mut lo = None;
+    for (k, c) in m.chunks(8).enumerate() {
+        let any = if c.len() == 8 {
+            word(c)
+        } else {
+            c.iter().any(|&v| v != 0)
+        };
+        if any {
+            lo = c.iter().position(|&v| v != 0).map(|p| 8 * k + p);
+            break;
+        }
+    }
+    let Some(lo) = lo else {
+        return (0, 0);
+    };
+    let hi = m.iter().rposition(|&v| v != 0).map_or(lo + 1, |p| p + 1);
+    (lo, hi)
+}
+
 /// Sobel gradients: L2 magnitude in the low 14 bits and the direction sector in the top two
 /// (0: across columns, 1: across rows, 2: the anti-diagonal, 3: the diagonal). The border
-/// is zero.
-fn sobel(src: &[u8], width: usize, height: usize, grad: &mut [u16]) {
+/// is zero. Computed only within one pixel of the mask (`spans`, per row), which is all that
+/// non-maximum suppression inside the mask reads; elsewhere `grad` keeps older values.
+fn sobel(src: &[u8], width: usize, height: usize, spans: &[(usize, usize)], grad: &mut [u16]) {
     grad[..width].fill(0);
     grad[(height - 1) * width..].fill(0);
-    let inner = width - 2;
     for r in 1..height - 1 {
-        let a = &src[(r - 1) * width..r * width];
-        let b = &src[r * width..(r + 1) * width];
-        let c = &src[(r + 1) * width..(r + 2) * width];
         let out = &mut grad[r * width..(r + 1) * width];
         out[0] = 0;
         out[width - 1] = 0;
-        let (a0, a1, a2) = (&a[..inner], &a[1..inner + 1], &a[2..inner + 2]);
-        let (b0, b2) = (&b[..inner], &b[2..inner + 2]);
-        let (c0, c1, c2) = (&c[..inner], &c[1..inner + 1], &c[2..inner + 2]);
-        let o = &mut out[1..inner + 1];
-        for i in 0..inner {
+        // Columns within one pixel of a mask pixel in this row or its neighbours.
+        let (mut lo, mut hi) = (usize::MAX, 0usize);
+        for &(a, b) in &spans[r - 1..=r + 1] {
+            if b > a {
+                lo = lo.min(a);
+                hi = hi.max(b);
+            }
+        }
+        if hi == 0 {
+            continue;
+        }
+        let lo = lo.saturating_sub(1).max(1);
+        let hi = (hi + 1).min(width - 1);
+        if hi <= lo {
+            continue;
+        }
+        let n = hi - lo;
+        let a = &src[(r - 1) * width..r * width];
+        let b = &src[r * width..(r + 1) * width];
+        let c = &src[(r + 1) * width..(r + 2) * width];
+        let (a0, a1, a2) = (&a[lo - 1..hi - 1], &a[lo..hi], &a[lo + 1..hi + 1]);
+        let (b0, b2) = (&b[lo - 1..hi - 1], &b[lo + 1..hi + 1]);
+        let (c0, c1, c2) = (&c[lo - 1..hi - 1], &c[lo..hi], &c[lo + 1..hi + 1]);
+        let o = &mut out[lo..hi];
+        for i in 0..n {
             let gx = (a2[i] as i16 + 2 * b2[i] as i16 + c2[i] as i16)
                 - (a0[i] as i16 + 2 * b0[i] as i16 + c0[i] as i16);
             let gy = (c0[i] as i16 + 2 * c1[i] as i16 + c2[i] as i16)
@@ -429,26 +479,32 @@ fn nms_hysteresis(
     width: usize,
     height: usize,
     mask: &[u8],
-    low: u16,
-    high: u16,
+    spans: &[(usize, usize)],
+    (low, high): (u16, u16),
     edges: &mut [u8],
     stack: &mut Vec<u32>,
 ) -> usize {
     stack.clear();
     let w = width as isize;
-    let inner = width - 2;
-    for r in 1..height - 1 {
+    for (r, &(span_lo, span_hi)) in spans.iter().enumerate().take(height - 1).skip(1) {
         let row = r * width;
-        // Rows above, at and below, shifted so that index i is the pixel (r, i + 1) and its
+        // Only the mask's columns of this row, never the border.
+        let (lo, hi) = (span_lo.max(1), span_hi.min(width - 1));
+        if hi <= lo {
+            continue;
+        }
+        let inner = hi - lo;
+        // Rows above, at and below, shifted so that index i is the pixel (r, lo + i) and its
         // neighbours; each sector picks its pair, all in straight slices so that it vectorises.
         let up = &grad[row - width..row];
         let mid = &grad[row..row + width];
         let dn = &grad[row + width..row + 2 * width];
-        let (ul, uc, ur) = (&up[..inner], &up[1..inner + 1], &up[2..inner + 2]);
-        let (ml, mc, mr) = (&mid[..inner], &mid[1..inner + 1], &mid[2..inner + 2]);
-        let (dl, dc, dr) = (&dn[..inner], &dn[1..inner + 1], &dn[2..inner + 2]);
-        let mk = &mask[row + 1..row + 1 + inner];
-        let out = &mut edges[row + 1..row + 1 + inner];
+        let (l, c, rt) = (lo - 1..hi - 1, lo..hi, lo + 1..hi + 1);
+        let (ul, uc, ur) = (&up[l.clone()], &up[c.clone()], &up[rt.clone()]);
+        let (ml, mc, mr) = (&mid[l.clone()], &mid[c.clone()], &mid[rt.clone()]);
+        let (dl, dc, dr) = (&dn[l], &dn[c.clone()], &dn[rt]);
+        let mk = &mask[row + lo..row + hi];
+        let out = &mut edges[row + lo..row + hi];
         for i in 0..inner {
             let g = mc[i];
             let m = g & MAG_MASK;
