@@ -72,6 +72,21 @@ unsafe extern "C" fn fill(
 /// The fake camera of the current session (a leaked reference), set by the connect hook.
 static FAKE_CAMERA: AtomicUsize = AtomicUsize::new(0);
 
+/// The fake camera behind an Aravis camera of the Fake interface. A reference is kept (leaked)
+/// so the pointer stays valid for the rest of the process.
+fn fake_camera_of(camera: &aravis::Camera) -> *mut aravis_sys::ArvFakeCamera {
+    let fake = camera
+        .device()
+        .expect("device")
+        .downcast::<aravis::FakeDevice>()
+        .expect("the Fake interface's device")
+        .fake_camera()
+        .expect("its fake camera");
+    let raw: *mut aravis_sys::ArvFakeCamera = fake.to_glib_none().0;
+    std::mem::forget(fake);
+    raw
+}
+
 /// The Fake interface has one camera: its tests take turns.
 static FAKE_TESTS: Mutex<()> = Mutex::new(());
 
@@ -235,14 +250,9 @@ fn injected_synthetic_field_gives_the_true_heading_and_tilt() {
 
     enable_interface("Fake");
     let hook: OnConnect = Box::new(move |camera: &aravis::Camera| {
-        let device = camera.device().expect("device");
-        let fake = device
-            .downcast::<aravis::FakeDevice>()
-            .expect("the Fake interface's device")
-            .fake_camera()
-            .expect("its fake camera");
-        let raw: *mut aravis_sys::ArvFakeCamera = fake.to_glib_none().0;
-        // SAFETY: the camera is alive (we hold `fake`); the callback data is leaked.
+        let raw = fake_camera_of(camera);
+        // SAFETY: the fake camera is alive (`fake_camera_of` keeps a reference); the
+        // callback data is leaked.
         unsafe {
             aravis_sys::arv_fake_camera_set_fill_pattern(
                 raw,
@@ -341,15 +351,7 @@ fn fake_camera_streams_and_short_buffers_never_reach_the_sink() {
     enable_interface("Fake");
     let image: &'static Vec<u8> = Box::leak(Box::new(injected_image()));
     let hook: OnConnect = Box::new(move |camera: &aravis::Camera| {
-        let device = camera.device().expect("device");
-        let fake = device
-            .downcast::<aravis::FakeDevice>()
-            .expect("the Fake interface's device")
-            .fake_camera()
-            .expect("its fake camera");
-        let raw: *mut aravis_sys::ArvFakeCamera = fake.to_glib_none().0;
-        std::mem::forget(fake); // keep a reference: the test thread uses the pointer later
-        FAKE_CAMERA.store(raw as usize, Ordering::Release);
+        FAKE_CAMERA.store(fake_camera_of(camera) as usize, Ordering::Release);
     });
     let buffers = 4;
     let cfg = GigeConfig {
