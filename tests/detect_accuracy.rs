@@ -130,8 +130,9 @@ fn table1_quick_ideal_lenses() {
         let s = summarise(&outs);
         report(name, &s);
         assert_eq!(s.correct, 6, "{name}: {outs:?}");
-        assert!(s.mean_mrad < 0.15, "{name}: {s:?}");
-        assert!(s.max_mrad < 0.5, "{name}: {s:?}");
+        // Measured: fisheye 0.088 / 0.134, PAL 0.055 / 0.135 mrad (mean / max).
+        assert!(s.mean_mrad < 0.12, "{name}: {s:?}");
+        assert!(s.max_mrad < 0.22, "{name}: {s:?}");
     }
 }
 
@@ -144,7 +145,8 @@ fn table1_quick_colour_and_bayer() {
         let s = summarise(&outs);
         report(&format!("fisheye {style:?}"), &s);
         assert_eq!(s.correct, 3, "{style:?}: {outs:?}");
-        assert!(s.max_mrad < 1.0, "{style:?}: {s:?}");
+        // Measured: colour 0.109, Bayer 0.178 mrad.
+        assert!(s.max_mrad < 0.3, "{style:?}: {s:?}");
     }
 }
 
@@ -211,7 +213,11 @@ fn shared_dir() -> std::path::PathBuf {
 
 /// Diagnostic (not a guard): per detected row, its error against the nearest true row,
 /// split into the part that moves the vanishing point (the normal's component along the
-/// true direction) and the rest. `cargo test --release --test detect_accuracy row_errors -- --ignored --nocapture`
+/// true direction) and the rest, by distance of the row from the camera; and the vanishing
+/// point the same rows give under other weightings.
+/// `cargo test --release --test detect_accuracy table1_row_errors -- --ignored --nocapture`;
+/// `OMNIROW_TABLE1_IMAGES` (default 10) images per lens, `OMNIROW_DETECT_OPTS` a TOML
+/// `DetectorOptions` to try, `OMNIROW_NOISE` a background noise density instead of 0.1.
 #[test]
 #[ignore]
 fn table1_row_errors() {

@@ -20,6 +20,9 @@ use serde::{Deserialize, Serialize};
 #[serde(deny_unknown_fields, default)]
 pub struct RefitOptions {
     pub enabled: bool,
+    /// Fits per row. The pixels are chosen once per row, so a second fit moves the normal
+    /// only by the few pixels at the band's edge that change sides (no measurable gain on
+    /// Table I); 1 by default.
     pub iterations: usize,
     /// Background level = median + this fraction of (threshold level − median); pixels
     /// below it weigh nothing.
@@ -42,7 +45,7 @@ impl Default for RefitOptions {
     fn default() -> Self {
         RefitOptions {
             enabled: true,
-            iterations: 2,
+            iterations: 1,
             background_fraction: 0.25,
             margin_px: 1.5,
             perspective: false,

@@ -86,7 +86,11 @@ pub fn keep_brightest(
     for (i, h) in hist.iter_mut().enumerate() {
         *h = hists[0][i] + hists[1][i] + hists[2][i] + hists[3][i];
     }
-    let valid: u64 = mask.iter().map(|&m| (m & 1) as u64).sum();
+    // Counted in runs with 32-bit lanes, which vectorise four times wider than 64-bit ones.
+    let valid: u64 = mask
+        .chunks(1 << 20)
+        .map(|c| c.iter().map(|&m| (m & 1) as u32).sum::<u32>() as u64)
+        .sum();
     // Median of the valid pixels: masked pixels sit in bin 0 with the valid zeros.
     let median = {
         let masked = image.len() as u64 - valid;

@@ -138,16 +138,26 @@ pub fn vegetation_image(
     match (view.format, factor) {
         (PixelFormat::Mono8, 1) => out.data.copy_from_slice(d),
         (PixelFormat::Mono8, _) => {
+            // Column pairs of the two rows summed first (contiguous, vectorised), then the
+            // pairs of sums, in runs that fit a stack buffer.
+            const RUN: usize = 256;
+            let mut sums = [0u16; 2 * RUN];
             for r in 0..oh {
-                let a = &d[2 * r * w..2 * r * w + w];
-                let b = &d[(2 * r + 1) * w..(2 * r + 1) * w + w];
+                let a = &d[2 * r * w..2 * r * w + 2 * ow];
+                let b = &d[(2 * r + 1) * w..(2 * r + 1) * w + 2 * ow];
                 let o = &mut out.data[r * ow..(r + 1) * ow];
-                for (c, v) in o.iter_mut().enumerate() {
-                    let s = a[2 * c] as u32
-                        + a[2 * c + 1] as u32
-                        + b[2 * c] as u32
-                        + b[2 * c + 1] as u32;
-                    *v = ((s + 2) >> 2) as u8;
+                for ((o, a), b) in o
+                    .chunks_mut(RUN)
+                    .zip(a.chunks(2 * RUN))
+                    .zip(b.chunks(2 * RUN))
+                {
+                    let t = &mut sums[..a.len()];
+                    for ((t, &x), &y) in t.iter_mut().zip(a).zip(b) {
+                        *t = x as u16 + y as u16;
+                    }
+                    for (v, p) in o.iter_mut().zip(t.chunks_exact(2)) {
+                        *v = ((p[0] + p[1] + 2) >> 2) as u8;
+                    }
                 }
             }
         }
