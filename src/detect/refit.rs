@@ -39,6 +39,13 @@ pub struct RefitOptions {
     pub full_sections: bool,
     /// Given a vanishing point, narrow each row's band towards it (see [`refit_rows`]).
     pub wedge: bool,
+    /// Pixel values are clipped at background + this fraction of (the row's median −
+    /// background), the median taken over the row's pixels above the background (mostly
+    /// the row's solid inside). A wide row's inside then weighs the same everywhere: the
+    /// background noise there (e.g. salt and pepper) no longer moves the centroid, while
+    /// the anti-aliased edges, which carry the sub-pixel position, keep their graded
+    /// values. 0 disables the clipping.
+    pub plateau_cap: f64,
 }
 
 impl Default for RefitOptions {
@@ -51,6 +58,7 @@ impl Default for RefitOptions {
             perspective: false,
             full_sections: true,
             wedge: true,
+            plateau_cap: 0.6,
         }
     }
 }
@@ -67,6 +75,12 @@ impl RefitOptions {
             return Err(DetectError::Options(format!(
                 "refit.margin_px = {} must be within 0..=50",
                 self.margin_px
+            )));
+        }
+        if !(self.plateau_cap.is_finite() && (0.0..=10.0).contains(&self.plateau_cap)) {
+            return Err(DetectError::Options(format!(
+                "refit.plateau_cap = {} must be within 0..=10",
+                self.plateau_cap
             )));
         }
         Ok(())
@@ -284,6 +298,7 @@ pub fn refit_rows(
             // pixel, which leaves the stretches where its cross-section is whole unchanged.
             keep_full_sections(img, &n, foot_band, margin, wedge, candidates);
         }
+        let cap = plateau_cap(img.values, candidates, background, opts.plateau_cap);
         let band = foot_band + margin;
         let s_band = band.min(1.5).sin() as f32;
         let (s_foot, s_margin) = (foot_band.min(1.5).sin() as f32, margin.sin() as f32);
@@ -312,7 +327,7 @@ pub fn refit_rows(
                         continue;
                     }
                 }
-                let w = (img.values[i] - background) as f64 * img.solid[i] as f64;
+                let w = (img.values[i].min(cap) - background) as f64 * img.solid[i] as f64;
                 let pv = Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64);
                 if let Some((e1, e2)) = basis {
                     let g = e1.dot(&pv);
@@ -351,6 +366,32 @@ pub fn refit_rows(
         }
     }
     Ok(done)
+}
+
+/// The level at which a row's pixel values are clipped: `background` + `fraction` × (the
+/// median of the `candidates`' values − `background`); 255 (no clipping) when `fraction` is 0
+/// or there are no candidates.
+fn plateau_cap(values: &[u8], candidates: &[u32], background: u8, fraction: f64) -> u8 {
+    if fraction <= 0.0 || candidates.is_empty() {
+        return 255;
+    }
+    let mut hist = [0u32; 256];
+    for &i in candidates {
+        hist[values[i as usize] as usize] += 1;
+    }
+    let half = candidates.len() as u32 / 2;
+    let mut acc = 0u32;
+    let mut median = 255u8;
+    for (v, &c) in hist.iter().enumerate() {
+        acc += c;
+        if acc > half {
+            median = v as u8;
+            break;
+        }
+    }
+    let cap = background as f64 + fraction * (median as f64 - background as f64).max(0.0);
+    // At least one level above the background, so that every candidate keeps some weight.
+    cap.round().clamp(background as f64 + 1.0, 255.0) as u8
 }
 
 /// Keeps in `candidates` only the pixels on stretches of the great circle of `n` whose
@@ -510,13 +551,19 @@ mod tests {
             support: 100,
         }];
         let mut cand = Vec::new();
+        // The row's edges here are one pixel sharp (no smoothing), where clipping the
+        // plateau would cut into them: the plain intensity centroid.
+        let centroid = RefitOptions {
+            plateau_cap: 0.0,
+            ..Default::default()
+        };
         let n = refit_rows(
             &img,
             &mut rows,
             &[0.05],
             None,
             false,
-            &RefitOptions::default(),
+            &centroid,
             &mut cand,
         )
         .unwrap();
