@@ -46,6 +46,13 @@ pub struct RefitOptions {
     /// the anti-aliased edges, which carry the sub-pixel position, keep their graded
     /// values. 0 disables the clipping.
     pub plateau_cap: f64,
+    /// The Hough method's final vanishing-point fit weighs each inlier row by the inverse of
+    /// the variance the refit estimates for its normal's component along the vanishing
+    /// point (from the background noise on its graded edge pixels, propagated through the
+    /// fit), instead of by its support. A row's precision depends on how far it reaches
+    /// towards the vanishing point and how wide and long its edges are, not on its number
+    /// of thresholded points.
+    pub precision_weights: bool,
 }
 
 impl Default for RefitOptions {
@@ -59,6 +66,7 @@ impl Default for RefitOptions {
             full_sections: true,
             wedge: true,
             plateau_cap: 0.6,
+            precision_weights: true,
         }
     }
 }
@@ -247,6 +255,7 @@ impl RefitImage<'_> {
 /// half, so its image is off its centre line by A·cos³ s, with s the angle along the great
 /// circle from the row's foot (the point 90° from the vanishing point) and A unknown per row.
 /// The fit solves for the normal's correction and A together (linear least squares).
+#[allow(clippy::too_many_arguments)]
 pub fn refit_rows(
     img: &RefitImage,
     rows: &mut [Row],
@@ -255,6 +264,7 @@ pub fn refit_rows(
     perspective: bool,
     opts: &RefitOptions,
     candidates: &mut Vec<u32>,
+    along_var: &mut Vec<f64>,
 ) -> Result<usize, DetectError> {
     if rows.len() != bands.len() {
         return Err(DetectError::Buffer(format!(
@@ -283,7 +293,9 @@ pub fn refit_rows(
     let vf = wedge.map_or([0f32; 3], |v| [v.x as f32, v.y as f32, v.z as f32]);
     let background = img.background;
     let mut done = 0;
+    along_var.clear();
     for (row, &foot_band) in rows.iter_mut().zip(bands) {
+        along_var.push(f64::NAN);
         let mut n = row.normal;
         collect_candidates(
             img,
@@ -314,6 +326,10 @@ pub fn refit_rows(
             });
             let mut ata = nalgebra::Matrix3::<f64>::zeros();
             let mut atb = Vector3::<f64>::zeros();
+            // Σ solid²·(n·p)²·p·pᵀ over the graded pixels (below the cap), whose noise moves
+            // the fit: for the variance of the normal (only without the perspective model).
+            let track = vp.is_some() && basis.is_none();
+            let mut noise = [0f64; 6];
             for &i in candidates.iter() {
                 let i = i as usize;
                 let p = img.rays[i];
@@ -336,6 +352,16 @@ pub fn refit_rows(
                     atb += w * phi * -n.dot(&pv);
                 } else {
                     sc.add(&pv, w);
+                    if track && img.values[i] < cap {
+                        let k = (img.solid[i] as f64 * d as f64).powi(2);
+                        let (x, y, z) = (pv.x, pv.y, pv.z);
+                        noise[0] += k * x * x;
+                        noise[1] += k * x * y;
+                        noise[2] += k * x * z;
+                        noise[3] += k * y * y;
+                        noise[4] += k * y * z;
+                        noise[5] += k * z * z;
+                    }
                 }
             }
             if let Some((e1, e2)) = basis {
@@ -356,6 +382,15 @@ pub fn refit_rows(
                 Some(f) if f.degeneracy < 0.5 => {
                     n = f.normal;
                     ok = true;
+                    if let (true, Some(v)) = (track, vp) {
+                        let m = nalgebra::Matrix3::new(
+                            noise[0], noise[1], noise[2], noise[1], noise[3], noise[4], noise[2],
+                            noise[4], noise[5],
+                        );
+                        let lambda = f.mean_sq_residual * f.weight;
+                        *along_var.last_mut().expect("pushed") =
+                            along_variance(&n, v, &sc.matrix(), lambda, &m);
+                    }
                 }
                 _ => break,
             }
@@ -366,6 +401,41 @@ pub fn refit_rows(
         }
     }
     Ok(done)
+}
+
+/// The variance (up to the image's noise variance per unit value) of the component along
+/// `v` of the normal `n` fitted as the smallest eigenvector of the scatter `s` (eigenvalue
+/// `lambda`), when the pixel weights carry independent noise whose effect on the scatter's
+/// product with `n` has the covariance `noise` (Σ solid²·(n·p)²·p·pᵀ): first-order
+/// perturbation of the eigenvector, δn = −(S − λ)⁻¹ δS n in the tangent plane of `n`.
+/// NaN when `v` is (nearly) `n` or the tangent system is singular.
+fn along_variance(
+    n: &Vector3<f64>,
+    v: &Vector3<f64>,
+    s: &nalgebra::Matrix3<f64>,
+    lambda: f64,
+    noise: &nalgebra::Matrix3<f64>,
+) -> f64 {
+    let ev = v - n * n.dot(v);
+    if ev.norm() < 1e-6 {
+        return f64::NAN;
+    }
+    let ev = ev.normalize();
+    let ef = n.cross(&ev);
+    let t = |m: &nalgebra::Matrix3<f64>| {
+        nalgebra::Matrix2::new(
+            ef.dot(&(m * ef)),
+            ef.dot(&(m * ev)),
+            ev.dot(&(m * ef)),
+            ev.dot(&(m * ev)),
+        )
+    };
+    let a = t(s) - nalgebra::Matrix2::identity() * lambda;
+    let Some(ai) = a.try_inverse() else {
+        return f64::NAN;
+    };
+    let c = ai * t(noise) * ai;
+    c[(1, 1)]
 }
 
 /// The level at which a row's pixel values are clipped: `background` + `fraction` × (the
@@ -565,6 +635,7 @@ mod tests {
             false,
             &centroid,
             &mut cand,
+            &mut Vec::new(),
         )
         .unwrap();
         assert_eq!(n, 1);
@@ -582,6 +653,7 @@ mod tests {
             false,
             &RefitOptions::default(),
             &mut cand,
+            &mut Vec::new(),
         )
         .is_err());
     }
