@@ -186,15 +186,28 @@ pub fn vegetation_image(
             }
         }
         (PixelFormat::BayerRggb8, _) => {
+            // The quad's two greens are centred on it, but its red sits half a pixel up and
+            // left and its blue half a pixel down and right: read as they are, every edge
+            // whose red and blue contrasts differ (plant against soil) shifts, which moves
+            // a row's fitted centre line by a fraction of a pixel that does not average out.
+            // Red and blue are interpolated (bilinearly, from the four nearest samples of
+            // each, clamped at the borders) to the quad's centre.
             for r in 0..oh {
                 let a = &d[2 * r * w..2 * r * w + w];
                 let b = &d[(2 * r + 1) * w..(2 * r + 1) * w + w];
+                // Red of the next quad row, blue of the previous one.
+                let an = &d[2 * (r + 1).min(oh - 1) * w..][..w];
+                let bp = &d[(2 * r.saturating_sub(1) + 1) * w..][..w];
                 let o = &mut out.data[r * ow..(r + 1) * ow];
                 for (c, v) in o.iter_mut().enumerate() {
-                    let red = a[2 * c] as i32;
-                    let g2 = a[2 * c + 1] as i32 + b[2 * c] as i32;
-                    let blue = b[2 * c + 1] as i32;
-                    *v = f(red, g2, blue);
+                    let (cn, cp) = (2 * (c + 1).min(ow - 1), 2 * c.saturating_sub(1) + 1);
+                    let (c0, c1) = (2 * c, 2 * c + 1);
+                    let red16 =
+                        9 * a[c0] as i32 + 3 * (a[cn] as i32 + an[c0] as i32) + an[cn] as i32;
+                    let blue16 =
+                        9 * b[c1] as i32 + 3 * (b[cp] as i32 + bp[c1] as i32) + bp[cp] as i32;
+                    let g2 = a[c1] as i32 + b[c0] as i32;
+                    *v = f((red16 + 8) >> 4, g2, (blue16 + 8) >> 4);
                 }
             }
         }
@@ -261,7 +274,9 @@ mod tests {
 
     #[test]
     fn bayer_quads_give_half_resolution_exg() {
-        // 4x2 Bayer: quad 0 green plant (R 40, G 200/190, B 30), quad 1 soil.
+        // 4x2 Bayer: quad 0 green plant (R 40, G 200/190, B 30), quad 1 soil. Red and blue
+        // are interpolated to each quad's centre: quad 0's red is (9·40 + 3·120 + 3·40 +
+        // 120) / 16 = 60, so its ExG is (390 − 60 − 30) / 2 = 150; quad 1's blue is 45.
         #[rustfmt::skip]
         let data = [
             40, 200, 120, 80,
@@ -271,7 +286,7 @@ mod tests {
         let mut out = GreyImage::default();
         let r = vegetation_image(&view, &VegetationOptions::default(), false, &mut out).unwrap();
         assert_eq!((r.factor, r.width, r.height), (2, 2, 1));
-        assert_eq!(out.data, vec![160, 0]);
+        assert_eq!(out.data, vec![150, 0]);
         let odd = [0u8; 6];
         let view = ImageView::new(3, 2, PixelFormat::BayerRggb8, &odd).unwrap();
         let e = vegetation_image(&view, &VegetationOptions::default(), false, &mut out)
