@@ -80,6 +80,15 @@ impl Scatter {
         self.count
     }
 
+    /// The accumulated Σ w·p·pᵀ (symmetric).
+    pub fn matrix(&self) -> Matrix3<f64> {
+        let mut m = self.m;
+        m[(1, 0)] = m[(0, 1)];
+        m[(2, 0)] = m[(0, 2)];
+        m[(2, 1)] = m[(1, 2)];
+        m
+    }
+
     pub fn weight(&self) -> f64 {
         self.weight
     }

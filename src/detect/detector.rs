@@ -19,7 +19,7 @@ use super::pose::heading_tilt;
 use super::refit::{refit_rows, RefitImage, RefitOptions, Tiles};
 use super::smooth::{Gaussian, SmoothOptions};
 use super::threshold::{keep_brightest, ThresholdOptions, ThresholdResult};
-use super::vanishing::{VanishingFinder, VanishingOptions, VanishingResult};
+use super::vanishing::{refit_direction, VanishingFinder, VanishingOptions, VanishingResult};
 use super::vegetation::{vegetation_image, working_factor, VegetationOptions};
 use super::{DetectError, Detection, GreyImage, Method, Row};
 use crate::camera::{Calibration, FovMask};
@@ -170,6 +170,8 @@ pub struct Preparer {
     kept: Vec<u32>,
     /// The refit's pixels near one row (room for every valid pixel, reserved at setup).
     candidates: Vec<u32>,
+    /// Per row of the last refit: the variance of its normal along the vanishing point.
+    along_var: Vec<f64>,
     last_threshold: ThresholdResult,
 }
 
@@ -198,6 +200,7 @@ impl Preparer {
             tmp: Vec::new(),
             kept: Vec::new(),
             candidates: Vec::new(),
+            along_var: Vec::with_capacity(256),
             last_threshold: ThresholdResult::default(),
         })
     }
@@ -439,7 +442,14 @@ impl Preparer {
             perspective,
             &self.opts.refit,
             &mut self.candidates,
+            &mut self.along_var,
         )
+    }
+
+    /// Per row of the last refit given a vanishing point: the variance of the row normal's
+    /// component along it, relative to the image's noise (NaN where not estimated).
+    pub fn row_variances(&self) -> &[f64] {
+        &self.along_var
     }
 }
 
@@ -642,6 +652,9 @@ impl Detector {
         if method != Method::Hough && self.opts.combined.precision_weighting {
             self.refit_by_precision(out);
         }
+        if method == Method::Hough && self.opts.refit.precision_weights {
+            self.refit_hough_by_precision(out);
+        }
         let t4 = Instant::now();
         self.times = StageTimes {
             prepare: t1 - t0,
@@ -675,6 +688,43 @@ impl Detector {
             direction: fit.direction,
             inliers: vp.inliers,
             residual_rad: fit.residual_rad,
+        });
+        out.heading_rad = Some(ht.heading_rad);
+        out.tilt_rad = Some(ht.tilt_rad);
+    }
+
+    /// The Hough method's final fit: the vanishing point refitted over its inlier rows, each
+    /// weighted by the inverse of its normal's variance along the vanishing point as the
+    /// refit estimated it. Keeps the vote's fit when any inlier lacks an estimate.
+    fn refit_hough_by_precision(&mut self, out: &mut Detection) {
+        let Some(vp) = out.vanishing_point else {
+            return;
+        };
+        let var = self.prep.row_variances();
+        let inliers = self.vanish.inliers();
+        if var.len() != out.rows.len() || inliers.len() != out.rows.len() {
+            return;
+        }
+        self.precision_weights.clear();
+        for (&v, &ok) in var.iter().zip(inliers) {
+            if !ok {
+                self.precision_weights.push(0.0);
+            } else if v.is_finite() && v > 0.0 {
+                self.precision_weights.push(1.0 / v);
+            } else {
+                return;
+            }
+        }
+        let Some((direction, residual_rad)) =
+            refit_direction(&out.rows, inliers, &self.precision_weights, &vp.direction)
+        else {
+            return;
+        };
+        let ht = heading_tilt(&direction, &self.prep.calibration().mounting);
+        out.vanishing_point = Some(super::VanishingPoint {
+            direction,
+            inliers: vp.inliers,
+            residual_rad,
         });
         out.heading_rad = Some(ht.heading_rad);
         out.tilt_rad = Some(ht.tilt_rad);

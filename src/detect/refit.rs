@@ -39,6 +39,20 @@ pub struct RefitOptions {
     pub full_sections: bool,
     /// Given a vanishing point, narrow each row's band towards it (see [`refit_rows`]).
     pub wedge: bool,
+    /// Pixel values are clipped at background + this fraction of (the row's median −
+    /// background), the median taken over the row's pixels above the background (mostly
+    /// the row's solid inside). A wide row's inside then weighs the same everywhere: the
+    /// background noise there (e.g. salt and pepper) no longer moves the centroid, while
+    /// the anti-aliased edges, which carry the sub-pixel position, keep their graded
+    /// values. 0 disables the clipping.
+    pub plateau_cap: f64,
+    /// The Hough method's final vanishing-point fit weighs each inlier row by the inverse of
+    /// the variance the refit estimates for its normal's component along the vanishing
+    /// point (from the background noise on its graded edge pixels, propagated through the
+    /// fit), instead of by its support. A row's precision depends on how far it reaches
+    /// towards the vanishing point and how wide and long its edges are, not on its number
+    /// of thresholded points.
+    pub precision_weights: bool,
 }
 
 impl Default for RefitOptions {
@@ -51,6 +65,8 @@ impl Default for RefitOptions {
             perspective: false,
             full_sections: true,
             wedge: true,
+            plateau_cap: 0.6,
+            precision_weights: true,
         }
     }
 }
@@ -67,6 +83,12 @@ impl RefitOptions {
             return Err(DetectError::Options(format!(
                 "refit.margin_px = {} must be within 0..=50",
                 self.margin_px
+            )));
+        }
+        if !(self.plateau_cap.is_finite() && (0.0..=10.0).contains(&self.plateau_cap)) {
+            return Err(DetectError::Options(format!(
+                "refit.plateau_cap = {} must be within 0..=10",
+                self.plateau_cap
             )));
         }
         Ok(())
@@ -233,6 +255,7 @@ impl RefitImage<'_> {
 /// half, so its image is off its centre line by A·cos³ s, with s the angle along the great
 /// circle from the row's foot (the point 90° from the vanishing point) and A unknown per row.
 /// The fit solves for the normal's correction and A together (linear least squares).
+#[allow(clippy::too_many_arguments)]
 pub fn refit_rows(
     img: &RefitImage,
     rows: &mut [Row],
@@ -241,6 +264,7 @@ pub fn refit_rows(
     perspective: bool,
     opts: &RefitOptions,
     candidates: &mut Vec<u32>,
+    along_var: &mut Vec<f64>,
 ) -> Result<usize, DetectError> {
     if rows.len() != bands.len() {
         return Err(DetectError::Buffer(format!(
@@ -269,7 +293,9 @@ pub fn refit_rows(
     let vf = wedge.map_or([0f32; 3], |v| [v.x as f32, v.y as f32, v.z as f32]);
     let background = img.background;
     let mut done = 0;
+    along_var.clear();
     for (row, &foot_band) in rows.iter_mut().zip(bands) {
+        along_var.push(f64::NAN);
         let mut n = row.normal;
         collect_candidates(
             img,
@@ -284,6 +310,7 @@ pub fn refit_rows(
             // pixel, which leaves the stretches where its cross-section is whole unchanged.
             keep_full_sections(img, &n, foot_band, margin, wedge, candidates);
         }
+        let cap = plateau_cap(img.values, candidates, background, opts.plateau_cap);
         let band = foot_band + margin;
         let s_band = band.min(1.5).sin() as f32;
         let (s_foot, s_margin) = (foot_band.min(1.5).sin() as f32, margin.sin() as f32);
@@ -299,6 +326,10 @@ pub fn refit_rows(
             });
             let mut ata = nalgebra::Matrix3::<f64>::zeros();
             let mut atb = Vector3::<f64>::zeros();
+            // Σ solid²·(n·p)²·p·pᵀ over the graded pixels (below the cap), whose noise moves
+            // the fit: for the variance of the normal (only without the perspective model).
+            let track = vp.is_some() && basis.is_none();
+            let mut noise = [0f64; 6];
             for &i in candidates.iter() {
                 let i = i as usize;
                 let p = img.rays[i];
@@ -312,7 +343,7 @@ pub fn refit_rows(
                         continue;
                     }
                 }
-                let w = (img.values[i] - background) as f64 * img.solid[i] as f64;
+                let w = (img.values[i].min(cap) - background) as f64 * img.solid[i] as f64;
                 let pv = Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64);
                 if let Some((e1, e2)) = basis {
                     let g = e1.dot(&pv);
@@ -321,6 +352,16 @@ pub fn refit_rows(
                     atb += w * phi * -n.dot(&pv);
                 } else {
                     sc.add(&pv, w);
+                    if track && img.values[i] < cap {
+                        let k = (img.solid[i] as f64 * d as f64).powi(2);
+                        let (x, y, z) = (pv.x, pv.y, pv.z);
+                        noise[0] += k * x * x;
+                        noise[1] += k * x * y;
+                        noise[2] += k * x * z;
+                        noise[3] += k * y * y;
+                        noise[4] += k * y * z;
+                        noise[5] += k * z * z;
+                    }
                 }
             }
             if let Some((e1, e2)) = basis {
@@ -341,6 +382,15 @@ pub fn refit_rows(
                 Some(f) if f.degeneracy < 0.5 => {
                     n = f.normal;
                     ok = true;
+                    if let (true, Some(v)) = (track, vp) {
+                        let m = nalgebra::Matrix3::new(
+                            noise[0], noise[1], noise[2], noise[1], noise[3], noise[4], noise[2],
+                            noise[4], noise[5],
+                        );
+                        let lambda = f.mean_sq_residual * f.weight;
+                        *along_var.last_mut().expect("pushed") =
+                            along_variance(&n, v, &sc.matrix(), lambda, &m);
+                    }
                 }
                 _ => break,
             }
@@ -351,6 +401,67 @@ pub fn refit_rows(
         }
     }
     Ok(done)
+}
+
+/// The variance (up to the image's noise variance per unit value) of the component along
+/// `v` of the normal `n` fitted as the smallest eigenvector of the scatter `s` (eigenvalue
+/// `lambda`), when the pixel weights carry independent noise whose effect on the scatter's
+/// product with `n` has the covariance `noise` (Σ solid²·(n·p)²·p·pᵀ): first-order
+/// perturbation of the eigenvector, δn = −(S − λ)⁻¹ δS n in the tangent plane of `n`.
+/// NaN when `v` is (nearly) `n` or the tangent system is singular.
+fn along_variance(
+    n: &Vector3<f64>,
+    v: &Vector3<f64>,
+    s: &nalgebra::Matrix3<f64>,
+    lambda: f64,
+    noise: &nalgebra::Matrix3<f64>,
+) -> f64 {
+    let ev = v - n * n.dot(v);
+    if ev.norm() < 1e-6 {
+        return f64::NAN;
+    }
+    let ev = ev.normalize();
+    let ef = n.cross(&ev);
+    let t = |m: &nalgebra::Matrix3<f64>| {
+        nalgebra::Matrix2::new(
+            ef.dot(&(m * ef)),
+            ef.dot(&(m * ev)),
+            ev.dot(&(m * ef)),
+            ev.dot(&(m * ev)),
+        )
+    };
+    let a = t(s) - nalgebra::Matrix2::identity() * lambda;
+    let Some(ai) = a.try_inverse() else {
+        return f64::NAN;
+    };
+    let c = ai * t(noise) * ai;
+    c[(1, 1)]
+}
+
+/// The level at which a row's pixel values are clipped: `background` + `fraction` × (the
+/// median of the `candidates`' values − `background`); 255 (no clipping) when `fraction` is 0
+/// or there are no candidates.
+fn plateau_cap(values: &[u8], candidates: &[u32], background: u8, fraction: f64) -> u8 {
+    if fraction <= 0.0 || candidates.is_empty() {
+        return 255;
+    }
+    let mut hist = [0u32; 256];
+    for &i in candidates {
+        hist[values[i as usize] as usize] += 1;
+    }
+    let half = candidates.len() as u32 / 2;
+    let mut acc = 0u32;
+    let mut median = 255u8;
+    for (v, &c) in hist.iter().enumerate() {
+        acc += c;
+        if acc > half {
+            median = v as u8;
+            break;
+        }
+    }
+    let cap = background as f64 + fraction * (median as f64 - background as f64).max(0.0);
+    // At least one level above the background, so that every candidate keeps some weight.
+    cap.round().clamp(background as f64 + 1.0, 255.0) as u8
 }
 
 /// Keeps in `candidates` only the pixels on stretches of the great circle of `n` whose
@@ -510,14 +621,21 @@ mod tests {
             support: 100,
         }];
         let mut cand = Vec::new();
+        // The row's edges here are one pixel sharp (no smoothing), where clipping the
+        // plateau would cut into them: the plain intensity centroid.
+        let centroid = RefitOptions {
+            plateau_cap: 0.0,
+            ..Default::default()
+        };
         let n = refit_rows(
             &img,
             &mut rows,
             &[0.05],
             None,
             false,
-            &RefitOptions::default(),
+            &centroid,
             &mut cand,
+            &mut Vec::new(),
         )
         .unwrap();
         assert_eq!(n, 1);
@@ -535,6 +653,7 @@ mod tests {
             false,
             &RefitOptions::default(),
             &mut cand,
+            &mut Vec::new(),
         )
         .is_err());
     }

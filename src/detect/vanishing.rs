@@ -308,6 +308,34 @@ impl VanishingFinder {
     }
 }
 
+/// Refits the direction over the `inliers` rows, each weighted by `weights[i]` (e.g. the
+/// inverse of its variance): the smallest eigenvector of Σ w·n·nᵀ, signed like `previous`.
+/// Returns it with the weighted rms residual (radians); `None` with fewer than two weighted
+/// inliers or a degenerate fit.
+pub fn refit_direction(
+    rows: &[Row],
+    inliers: &[bool],
+    weights: &[f64],
+    previous: &Vector3<f64>,
+) -> Option<(Vector3<f64>, f64)> {
+    let mut sc = Scatter::new();
+    for ((r, &ok), &w) in rows.iter().zip(inliers).zip(weights) {
+        if ok && w > 0.0 && w.is_finite() {
+            sc.add(&r.normal, w);
+        }
+    }
+    if sc.count() < 2 {
+        return None;
+    }
+    let fit = sc.fit()?;
+    let v = if fit.normal.dot(previous) < 0.0 {
+        -fit.normal
+    } else {
+        fit.normal
+    };
+    Some((v, fit.mean_sq_residual.max(0.0).sqrt().asin()))
+}
+
 /// Row weights for the Hough method: each row's support.
 pub fn support_weights(rows: &[Row], out: &mut Vec<f64>) {
     out.clear();
@@ -396,6 +424,21 @@ mod tests {
             .unwrap();
         assert!(r.vanishing_point.is_none());
         assert!(f.find(&rows, &[1.0], &mut inl).is_err());
+    }
+
+    #[test]
+    fn refit_direction_follows_the_weights() {
+        let vp = dir(0.2, 0.03);
+        let mut rows = rows_through(&vp, &[0.3, 1.1, 2.0], 100);
+        // tilt the third row's normal off the vanishing point
+        rows[2].normal = (rows[2].normal + vp * 0.01).normalize();
+        let inl = [true, true, true];
+        let (v, res) = refit_direction(&rows, &inl, &[1.0, 1.0, 1e-9], &vp).unwrap();
+        assert!(axis_angle(&v, &vp) < 1e-6, "{}", axis_angle(&v, &vp));
+        assert!(v.dot(&vp) > 0.0 && res < 1e-4);
+        let (v, _) = refit_direction(&rows, &inl, &[1.0, 1.0, 1.0], &-vp).unwrap();
+        assert!(axis_angle(&v, &vp) > 1e-3 && v.dot(&vp) < 0.0);
+        assert!(refit_direction(&rows, &[true, false, false], &[1.0; 3], &vp).is_none());
     }
 
     #[test]

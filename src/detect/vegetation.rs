@@ -186,16 +186,15 @@ pub fn vegetation_image(
             }
         }
         (PixelFormat::BayerRggb8, _) => {
-            for r in 0..oh {
-                let a = &d[2 * r * w..2 * r * w + w];
-                let b = &d[(2 * r + 1) * w..(2 * r + 1) * w + w];
-                let o = &mut out.data[r * ow..(r + 1) * ow];
-                for (c, v) in o.iter_mut().enumerate() {
-                    let red = a[2 * c] as i32;
-                    let g2 = a[2 * c + 1] as i32 + b[2 * c] as i32;
-                    let blue = b[2 * c + 1] as i32;
-                    *v = f(red, g2, blue);
-                }
+            // The quad's two greens are centred on it, but its red sits half a pixel up and
+            // left and its blue half a pixel down and right: read as they are, every edge
+            // whose red and blue contrasts differ (plant against soil) shifts, which moves
+            // a row's fitted centre line by a fraction of a pixel that does not average out.
+            // Red and blue are interpolated (bilinearly, from the four nearest samples of
+            // each, clamped at the borders) to the quad's centre.
+            match index {
+                VegetationIndex::Luma => bayer_centred(d, w, oh, &mut out.data, luma),
+                _ => bayer_centred(d, w, oh, &mut out.data, exg),
             }
         }
     }
@@ -204,6 +203,57 @@ pub fn vegetation_image(
         width: ow,
         height: oh,
     })
+}
+
+/// The vegetation index `f` of each quad of a Bayer RGGB image (`w` wide, `oh` quad rows)
+/// into `out`, with red and blue interpolated bilinearly to the quad's centre from the four
+/// nearest samples of each (clamped at the borders).
+fn bayer_centred(d: &[u8], w: usize, oh: usize, out: &mut [u8], f: impl Fn(i32, i32, i32) -> u8) {
+    let ow = w / 2;
+    for r in 0..oh {
+        let a = &d[2 * r * w..2 * r * w + w];
+        let b = &d[(2 * r + 1) * w..(2 * r + 1) * w + w];
+        // Red of the next quad row, blue of the previous one.
+        let an = &d[2 * (r + 1).min(oh - 1) * w..][..w];
+        let bp = &d[(2 * r.saturating_sub(1) + 1) * w..][..w];
+        let o = &mut out[r * ow..(r + 1) * ow];
+        let quad = |c: usize| {
+            let (cn, cp) = (2 * (c + 1).min(ow - 1), 2 * c.saturating_sub(1) + 1);
+            let (c0, c1) = (2 * c, 2 * c + 1);
+            let red16 = 9 * a[c0] as i32 + 3 * (a[cn] as i32 + an[c0] as i32) + an[cn] as i32;
+            let blue16 = 9 * b[c1] as i32 + 3 * (b[cp] as i32 + bp[c1] as i32) + bp[cp] as i32;
+            let g2 = a[c1] as i32 + b[c0] as i32;
+            f((red16 + 8) >> 4, g2, (blue16 + 8) >> 4)
+        };
+        o[0] = quad(0);
+        if ow > 1 {
+            o[ow - 1] = quad(ow - 1);
+        }
+        if ow > 2 {
+            // Inner quads 1..ow-1, without clamping, pairwise over slices (so that the loop
+            // vectorises): quad c reads columns 2c-1 ..= 2c+2.
+            let n = ow - 2;
+            let it = o[1..ow - 1]
+                .iter_mut()
+                .zip(a[2..2 * n + 2].chunks_exact(2))
+                .zip(a[4..2 * n + 4].chunks_exact(2))
+                .zip(an[2..2 * n + 2].chunks_exact(2))
+                .zip(an[4..2 * n + 4].chunks_exact(2))
+                .zip(b[1..2 * n + 1].chunks_exact(2))
+                .zip(b[3..2 * n + 3].chunks_exact(2))
+                .zip(bp[1..2 * n + 1].chunks_exact(2))
+                .zip(bp[3..2 * n + 3].chunks_exact(2));
+            for ((((((((v, a0), a1), an0), an1), b0), b1), bp0), bp1) in it {
+                // a0: this quad's top (R, G), a1: the next quad's; b0: the previous quad's
+                // bottom B and this quad's bottom G, b1: this quad's B; an*, bp*: the same
+                // in the next and previous quad rows.
+                let red16 = 9 * a0[0] as i32 + 3 * (a1[0] as i32 + an0[0] as i32) + an1[0] as i32;
+                let blue16 = 9 * b1[0] as i32 + 3 * (b0[0] as i32 + bp1[0] as i32) + bp0[0] as i32;
+                let g2 = a0[1] as i32 + b0[1] as i32;
+                *v = f((red16 + 8) >> 4, g2, (blue16 + 8) >> 4);
+            }
+        }
+    }
 }
 
 /// Brightness of input pixel (row, col) whatever the format (Bayer: mean of its quad).
@@ -261,7 +311,9 @@ mod tests {
 
     #[test]
     fn bayer_quads_give_half_resolution_exg() {
-        // 4x2 Bayer: quad 0 green plant (R 40, G 200/190, B 30), quad 1 soil.
+        // 4x2 Bayer: quad 0 green plant (R 40, G 200/190, B 30), quad 1 soil. Red and blue
+        // are interpolated to each quad's centre: quad 0's red is (9·40 + 3·120 + 3·40 +
+        // 120) / 16 = 60, so its ExG is (390 − 60 − 30) / 2 = 150; quad 1's blue is 45.
         #[rustfmt::skip]
         let data = [
             40, 200, 120, 80,
@@ -271,13 +323,40 @@ mod tests {
         let mut out = GreyImage::default();
         let r = vegetation_image(&view, &VegetationOptions::default(), false, &mut out).unwrap();
         assert_eq!((r.factor, r.width, r.height), (2, 2, 1));
-        assert_eq!(out.data, vec![160, 0]);
+        assert_eq!(out.data, vec![150, 0]);
         let odd = [0u8; 6];
         let view = ImageView::new(3, 2, PixelFormat::BayerRggb8, &odd).unwrap();
         let e = vegetation_image(&view, &VegetationOptions::default(), false, &mut out)
             .unwrap_err()
             .to_string();
         assert!(e.contains("even"), "{e}");
+    }
+
+    #[test]
+    fn bayer_red_and_blue_are_centred_on_the_quad() {
+        // Reference: bilinear red and blue at each quad's centre, clamped at the borders.
+        let (w, h) = (12usize, 6usize);
+        let data: Vec<u8> = (0..w * h).map(|i| ((i * 37 + 11) % 251) as u8).collect();
+        let view = ImageView::new(w as u32, h as u32, PixelFormat::BayerRggb8, &data).unwrap();
+        let mut out = GreyImage::default();
+        vegetation_image(&view, &VegetationOptions::default(), false, &mut out).unwrap();
+        let (ow, oh) = (w / 2, h / 2);
+        let px = |r: usize, c: usize| data[r * w + c] as i32;
+        for r in 0..oh {
+            for c in 0..ow {
+                let (rn, cn) = ((r + 1).min(oh - 1), (c + 1).min(ow - 1));
+                let (rp, cp) = (r.saturating_sub(1), c.saturating_sub(1));
+                let red = 9 * px(2 * r, 2 * c)
+                    + 3 * (px(2 * r, 2 * cn) + px(2 * rn, 2 * c))
+                    + px(2 * rn, 2 * cn);
+                let blue = 9 * px(2 * r + 1, 2 * c + 1)
+                    + 3 * (px(2 * r + 1, 2 * cp + 1) + px(2 * rp + 1, 2 * c + 1))
+                    + px(2 * rp + 1, 2 * cp + 1);
+                let g2 = px(2 * r, 2 * c + 1) + px(2 * r + 1, 2 * c);
+                let want = exg((red + 8) >> 4, g2, (blue + 8) >> 4);
+                assert_eq!(out.data[r * ow + c], want, "quad ({r}, {c})");
+            }
+        }
     }
 
     #[test]
