@@ -151,3 +151,55 @@ fn table1_quick_edge_and_combined() {
         );
     }
 }
+
+/// Table II protocol (paper IV-A, heavy noise), fixed seeds, at 1224×1025: the combined
+/// method fails on no more images than either single method on each lens (the full figures
+/// come from `omnirow eval`; a failure is a vanishing point missing or more than 1° off).
+#[test]
+fn table2_quick_combined_fails_least() {
+    let methods = [Method::Hough, Method::Edge, Method::Combined];
+    let mut sums = [0usize; 3];
+    for (name, cal) in [
+        ("fisheye", ideal_fisheye(1025, 1224)),
+        ("pal", ideal_pal(1025, 1224)),
+    ] {
+        let mut dets: Vec<Detector> = methods
+            .iter()
+            .map(|&m| {
+                Detector::new(
+                    &cal,
+                    DetectorOptions {
+                        method: m,
+                        ..Default::default()
+                    },
+                )
+                .unwrap()
+            })
+            .collect();
+        let mut fails = [0usize; 3];
+        for seed in 1..=12 {
+            let (img, truth) = render(&cal, &random_scene(seed, Protocol::Table2), seed).unwrap();
+            let view = ImageView::new(img.width, img.height, img.format, &img.data).unwrap();
+            let vp = Vector3::from(truth.vp_along);
+            for (k, d) in dets.iter_mut().enumerate() {
+                let mut out = Detection::default();
+                d.process(&view, &mut out).unwrap();
+                let e = out
+                    .vanishing_point
+                    .map_or(f64::INFINITY, |v| axis_angle(&v.direction, &vp));
+                fails[k] += (e > 1f64.to_radians()) as usize;
+            }
+        }
+        eprintln!("{name}: Table II failures of 12 (hough, edge, combined) {fails:?}");
+        assert!(
+            fails[2] <= fails[0].min(fails[1]),
+            "{name}: combined fails more than a single method: {fails:?}"
+        );
+        // The protocol is hard: the edge method fails on most images.
+        assert!(fails[1] >= 6, "{name}: {fails:?}");
+        for k in 0..3 {
+            sums[k] += fails[k];
+        }
+    }
+    assert!(sums[2] <= sums[0] && sums[0] < sums[1], "{sums:?}");
+}

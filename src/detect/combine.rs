@@ -218,6 +218,60 @@ pub fn precision_fit(
     })
 }
 
+/// How well both methods' rows agree with a candidate vanishing point `v` (see
+/// [`consensus_score`]).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Consensus {
+    /// Per method (Hough, edge): the share of the method's total support on rows within the
+    /// tolerance of `v`, times (1 − 2^(1 − inlier rows)), so that one row alone counts
+    /// nothing and two count half (as the vanishing stage's quality does).
+    pub hough: f64,
+    pub edge: f64,
+    /// Inlier rows per method (Hough, edge).
+    pub hough_rows: usize,
+    pub edge_rows: usize,
+}
+
+impl Consensus {
+    /// The score: the two methods' agreement, summed with equal weight. A vanishing point
+    /// that both methods' rows support scores higher than one only its own method's rows
+    /// support; the paper's w balances the methods' votes, but the support of one method's
+    /// rows is not comparable with the other's (edge points against accumulator weight), so
+    /// each method's agreement is measured as a share of its own rows.
+    pub fn score(&self) -> f64 {
+        self.hough + self.edge
+    }
+}
+
+/// Scores candidate vanishing point `v` by how much of each method's rows (by support) pass
+/// within `sin_tol` (the sine of the inlier tolerance) of the plane perpendicular to it.
+pub fn consensus_score(rows: &[Row], v: &Vector3<f64>, sin_tol: f64) -> Consensus {
+    let mut total = [0.0f64; 2];
+    let mut inl = [0.0f64; 2];
+    let mut count = [0usize; 2];
+    for r in rows {
+        let Some(k) = slot(r.method) else { continue };
+        total[k] += r.support as f64;
+        if r.normal.dot(v).abs() < sin_tol {
+            inl[k] += r.support as f64;
+            count[k] += 1;
+        }
+    }
+    let q = |k: usize| -> f64 {
+        if total[k] <= 0.0 || count[k] == 0 {
+            0.0
+        } else {
+            inl[k] / total[k] * (1.0 - 0.5f64.powi(count[k] as i32 - 1))
+        }
+    };
+    Consensus {
+        hough: q(0),
+        edge: q(1),
+        hough_rows: count[0],
+        edge_rows: count[1],
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -336,5 +390,41 @@ mod tests {
         assert!(e < 1.5e-4, "robust {e} (plain {e_plain})");
         assert!(w[5] < 0.05 * w[0], "{w:?}");
         assert_eq!(p.sigma_hough, 0.0);
+    }
+
+    #[test]
+    fn consensus_counts_each_method_as_a_share_of_its_own_rows() {
+        let vp = Vector3::new(0.2, 0.95, -0.1).normalize();
+        let other = Vector3::new(0.9, 0.3, 0.1).normalize();
+        // Three Hough rows through vp (large support), one through `other`; four edge rows
+        // through vp (small support), one through `other`.
+        let mut all = rows(
+            &vp,
+            Method::Hough,
+            &[(0.3, 0.0, 900), (1.1, 0.0, 800), (2.0, 0.0, 700)],
+        );
+        all.extend(rows(&other, Method::Hough, &[(0.5, 0.0, 1000)]));
+        all.extend(rows(
+            &vp,
+            Method::Edge,
+            &[
+                (0.2, 0.0, 40),
+                (0.9, 0.0, 50),
+                (1.5, 0.0, 30),
+                (2.5, 0.0, 40),
+            ],
+        ));
+        all.extend(rows(&other, Method::Edge, &[(1.0, 0.0, 40)]));
+        let tol = 1f64.to_radians().sin();
+        let c = consensus_score(&all, &vp, tol);
+        assert_eq!((c.hough_rows, c.edge_rows), (3, 4));
+        assert!((c.hough - 2400.0 / 3400.0 * 0.75).abs() < 1e-9, "{c:?}");
+        assert!((c.edge - 160.0 / 200.0 * 0.875).abs() < 1e-9, "{c:?}");
+        // A direction only one row of each method passes through scores nothing.
+        let d = consensus_score(&all, &other, tol);
+        assert_eq!((d.hough_rows, d.edge_rows), (1, 1));
+        assert_eq!(d.score(), 0.0);
+        assert!(c.score() > d.score());
+        assert_eq!(consensus_score(&[], &vp, tol), Consensus::default());
     }
 }

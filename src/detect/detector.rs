@@ -11,7 +11,7 @@
 //! (paper II-F, eq. 5: edge rows weighted w·support, Hough rows (1−w)·support, in one
 //! vanishing-point Hough).
 
-use super::combine::precision_fit;
+use super::combine::{consensus_score, precision_fit};
 use super::edge::{EdgeDetector, EdgeError, EdgeOptions, EdgeResult};
 use super::hough::{HoughOptions, HoughResult, HoughRows};
 use super::mask::{build_mask, find_fov, MaskOptions, MaskResult};
@@ -75,6 +75,17 @@ pub struct CombinedOptions {
     pub precision_weighting: bool,
     /// The smallest per-method scatter (mrad) the precision weighting assumes. Default 0.02.
     pub precision_floor_mrad: f64,
+    /// After the eq. 5 vote, also find the vanishing point of each method's rows alone, and
+    /// take whichever of the three candidates both methods' rows agree with best (see
+    /// [`super::combine::consensus_score`]): another candidate replaces the vote's only when
+    /// it scores higher and passes through at least two Hough rows and three rows in all
+    /// (edge rows count only where they agree with the Hough rows' structure). The final
+    /// inlier rows are then those of either method consistent with the chosen candidate.
+    /// The vote is dominated by whichever method's support is larger (Hough accumulator
+    /// weight outnumbers edge points), so on a noisy image where the Hough rows are few and
+    /// bent, many edge boundaries agreeing with some Hough rows would otherwise be outvoted.
+    /// Default true.
+    pub consensus: bool,
 }
 
 impl Default for CombinedOptions {
@@ -83,6 +94,7 @@ impl Default for CombinedOptions {
             edge_weight: 0.7,
             precision_weighting: true,
             precision_floor_mrad: 0.02,
+            consensus: true,
         }
     }
 }
@@ -533,6 +545,10 @@ pub struct Detector {
     weights: Vec<f64>,
     precision_weights: Vec<f64>,
     precision_scratch: Vec<(f64, f64)>,
+    /// The consensus step's per-method weights and inlier flags, and the final inliers.
+    candidate_weights: Vec<f64>,
+    candidate_inliers: Vec<bool>,
+    final_inliers: Vec<bool>,
     times: StageTimes,
     last_prepare: PrepareResult,
     last_hough: HoughResult,
@@ -569,6 +585,9 @@ impl Detector {
             weights: Vec::with_capacity(128),
             precision_weights: Vec::with_capacity(128),
             precision_scratch: Vec::with_capacity(128),
+            candidate_weights: Vec::with_capacity(128),
+            candidate_inliers: Vec::with_capacity(128),
+            final_inliers: Vec::with_capacity(128),
             times: StageTimes::default(),
             last_prepare: PrepareResult::default(),
             last_hough: HoughResult::default(),
@@ -639,6 +658,11 @@ impl Detector {
                 self.vanish.run(Some(&self.weights), out)?;
             }
         }
+        self.final_inliers.clear();
+        self.final_inliers.extend_from_slice(self.vanish.inliers());
+        if method == Method::Combined && self.opts.combined.consensus {
+            self.consensus(out)?;
+        }
         if method != Method::Hough && self.opts.combined.precision_weighting {
             self.refit_by_precision(out);
         }
@@ -659,7 +683,7 @@ impl Detector {
             return;
         };
         let floor = self.opts.combined.precision_floor_mrad * 1e-3;
-        let inliers = self.vanish.inliers();
+        let inliers = &self.final_inliers;
         let Some(fit) = precision_fit(
             &out.rows,
             inliers,
@@ -678,6 +702,81 @@ impl Detector {
         });
         out.heading_rad = Some(ht.heading_rad);
         out.tilt_rad = Some(ht.tilt_rad);
+    }
+
+    /// The combined method's consensus step (see [`CombinedOptions::consensus`]): the vote's
+    /// vanishing point against those of the Hough rows alone and of the edge rows alone,
+    /// scored by how much of each method's rows agree with each. When another candidate
+    /// wins, the rows of either method within the inlier tolerance of it become the inliers
+    /// (iterated with the vote's weights, as the vanishing stage does) and `out` takes its
+    /// vanishing point; `final_inliers` holds the inliers either way.
+    fn consensus(&mut self, out: &mut Detection) -> Result<(), DetectError> {
+        let Some(vote) = out.vanishing_point else {
+            return Ok(());
+        };
+        let sin_tol = self.opts.vanishing.inlier_deg.to_radians().sin();
+        let mut best = consensus_score(&out.rows, &vote.direction, sin_tol).score();
+        let mut chosen: Option<Vector3<f64>> = None;
+        for only in [Method::Hough, Method::Edge] {
+            self.candidate_weights.clear();
+            for (r, &w) in out.rows.iter().zip(&self.weights) {
+                self.candidate_weights
+                    .push(if r.method == only { w } else { 0.0 });
+            }
+            let r = self.vanish.finder.find(
+                &out.rows,
+                &self.candidate_weights,
+                &mut self.candidate_inliers,
+            )?;
+            let Some(vp) = r.vanishing_point else {
+                continue;
+            };
+            let c = consensus_score(&out.rows, &vp.direction, sin_tol);
+            if c.hough_rows >= 2 && c.hough_rows + c.edge_rows >= 3 && c.score() > best {
+                best = c.score();
+                chosen = Some(vp.direction);
+            }
+        }
+        let Some(mut v) = chosen else {
+            return Ok(());
+        };
+        let mut residual = 0.0;
+        let mut count = 0;
+        for _ in 0..self.opts.vanishing.refine_iterations.max(1) {
+            let mut sc = crate::sphere::Scatter::new();
+            for (i, r) in out.rows.iter().enumerate() {
+                let ok = r.normal.dot(&v).abs() < sin_tol && self.weights[i] > 0.0;
+                self.final_inliers[i] = ok;
+                if ok {
+                    sc.add(&r.normal, self.weights[i]);
+                }
+            }
+            count = sc.count();
+            let Some(fit) = sc.fit() else { break };
+            let n = if fit.normal.dot(&v) < 0.0 {
+                -fit.normal
+            } else {
+                fit.normal
+            };
+            let moved = crate::sphere::axis_angle(&n, &v);
+            v = n;
+            residual = fit.mean_sq_residual.max(0.0).sqrt().asin();
+            if moved < 1e-12 {
+                break;
+            }
+        }
+        for (i, r) in out.rows.iter().enumerate() {
+            self.final_inliers[i] = r.normal.dot(&v).abs() < sin_tol && self.weights[i] > 0.0;
+        }
+        let ht = heading_tilt(&v, &self.prep.calibration().mounting);
+        out.vanishing_point = Some(super::VanishingPoint {
+            direction: v,
+            inliers: count,
+            residual_rad: residual,
+        });
+        out.heading_rad = Some(ht.heading_rad);
+        out.tilt_rad = Some(ht.tilt_rad);
+        Ok(())
     }
 
     /// Runs the edge method on the preparer's smoothed vegetation image and mask.
