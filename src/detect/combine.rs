@@ -44,7 +44,7 @@ const CAUCHY: f64 = 4.0;
 /// a crop row counts about once, as its Hough centre line does. Measured on Table I (40
 /// images per lens, 1224×1025): 1.0 let the edge rows' common bias pull the fisheye answer
 /// past the Hough one on some seeds; 0.5 keeps the combined method the better on both lenses.
-const EDGE_PAIR_FACTOR: f64 = 0.5;
+pub const EDGE_PAIR_FACTOR: f64 = 0.5;
 /// Reweighting iterations of the final fit.
 const ITERATIONS: usize = 6;
 
@@ -136,6 +136,7 @@ pub fn precision_fit(
     inliers: &[bool],
     v0: &Vector3<f64>,
     floor_rad: f64,
+    edge_factor: f64,
     weights: &mut Vec<f64>,
     scratch: &mut Vec<(f64, f64)>,
 ) -> Option<PrecisionFit> {
@@ -181,7 +182,7 @@ pub fn precision_fit(
         match slot(rows[i].method) {
             Some(k) if inliers[i] => {
                 let s = &stats[k];
-                let f = if k == 1 { EDGE_PAIR_FACTOR } else { 1.0 };
+                let f = if k == 1 { edge_factor } else { 1.0 };
                 f * rows[i].support as f64 / (s.support / s.count as f64) / (s.sigma * s.sigma)
             }
             _ => 0.0,
@@ -216,6 +217,111 @@ pub fn precision_fit(
         sigma_hough: stats[0].sigma,
         sigma_edge: stats[1].sigma,
     })
+}
+
+/// Pairs the edge method's two boundary lines of a crop row into one centre line, using the
+/// Hough rows as the crop rows' centres ("edge rows only where they agree with Hough's
+/// structure"). For each Hough inlier row, the edge inlier row of largest support on either side of it
+/// (around the vanishing point `vp`), each within `max_half_rad` and within half the way to
+/// the neighbouring Hough inlier row, form a pair; its centre line is the bisecting plane
+/// (the normalised sum of the two normals, signs aligned), which still contains the
+/// vanishing point, and whose error is the mean of the two boundaries' (the boundaries of
+/// one row are biased in opposite directions by the plants' width and the smoothing, so the
+/// mean cancels most of it). The centre lines are written to `out` as edge rows with the
+/// pair's summed support, after a copy of every Hough row; `out_inliers` flags them (and
+/// the Hough rows as `inliers` did). Unpaired edge rows are left out. Returns the number of
+/// pairs. Work buffers are the caller's (`psi`), so that a warmed-up caller allocates
+/// nothing.
+#[allow(clippy::too_many_arguments)]
+pub fn pair_edge_rows(
+    rows: &[Row],
+    inliers: &[bool],
+    vp: &Vector3<f64>,
+    max_half_rad: f64,
+    out: &mut Vec<Row>,
+    out_inliers: &mut Vec<bool>,
+    psi: &mut Vec<(f64, usize, bool)>,
+) -> usize {
+    out.clear();
+    out_inliers.clear();
+    psi.clear();
+    if rows.len() != inliers.len() {
+        return 0;
+    }
+    let a = crate::sphere::any_perpendicular(vp);
+    let b = vp.cross(&a);
+    // Angle of a normal around the vanishing point, modulo π (the sign is free).
+    let angle = |n: &Vector3<f64>| -> f64 {
+        let t = n.dot(&b).atan2(n.dot(&a));
+        t.rem_euclid(std::f64::consts::PI)
+    };
+    let wrap = |d: f64| -> f64 {
+        let pi = std::f64::consts::PI;
+        let d = d.rem_euclid(pi);
+        if d > 0.5 * pi {
+            d - pi
+        } else {
+            d
+        }
+    };
+    for (i, r) in rows.iter().enumerate() {
+        if inliers[i] && r.method != Method::Combined {
+            psi.push((angle(&r.normal), i, r.method == Method::Hough));
+        }
+        if r.method == Method::Hough {
+            out.push(*r);
+            out_inliers.push(inliers[i]);
+        }
+    }
+    let n = psi.len();
+    let mut pairs = 0;
+    for h in 0..n {
+        let (ph, _, is_hough) = psi[h];
+        if !is_hough {
+            continue;
+        }
+        // Half the way to the nearest other Hough inlier row, at most max_half_rad.
+        let mut limit = max_half_rad;
+        for (p, _, hh) in psi.iter() {
+            let d = wrap(p - ph).abs();
+            if *hh && d > 1e-9 {
+                limit = limit.min(0.5 * d);
+            }
+        }
+        // On each side, the boundary with the largest support (a long, exact boundary
+        // rather than a short stray section nearer the centre).
+        let (mut left, mut right): (Option<(u32, usize)>, Option<(u32, usize)>) = (None, None);
+        for (p, i, hh) in psi.iter() {
+            if *hh {
+                continue;
+            }
+            let d = wrap(p - ph);
+            if d.abs() >= limit {
+                continue;
+            }
+            let s = rows[*i].support;
+            let side = if d < 0.0 { &mut left } else { &mut right };
+            if side.map_or(true, |(best, _)| s > best) {
+                *side = Some((s, *i));
+            }
+        }
+        if let (Some((_, l)), Some((_, r))) = (left, right) {
+            let (nl, nr) = (rows[l].normal, rows[r].normal);
+            let nr = if nl.dot(&nr) < 0.0 { -nr } else { nr };
+            let c = nl + nr;
+            let norm = c.norm();
+            if norm > 1e-12 {
+                out.push(Row {
+                    normal: c / norm,
+                    method: Method::Edge,
+                    support: rows[l].support.saturating_add(rows[r].support),
+                });
+                out_inliers.push(true);
+                pairs += 1;
+            }
+        }
+    }
+    pairs
 }
 
 /// How well both methods' rows agree with a candidate vanishing point `v` (see
@@ -323,7 +429,16 @@ mod tests {
         }
         let e_plain = axis_angle(&plain.fit().unwrap().normal, &vp);
         let mut w = Vec::new();
-        let p = precision_fit(&all, &inl, &vp, 1e-5, &mut w, &mut Vec::new()).unwrap();
+        let p = precision_fit(
+            &all,
+            &inl,
+            &vp,
+            1e-5,
+            EDGE_PAIR_FACTOR,
+            &mut w,
+            &mut Vec::new(),
+        )
+        .unwrap();
         let e = axis_angle(&p.direction, &vp);
         assert!(e < 6e-5, "precision fit error {e}");
         assert!(e_plain > 1.5e-4, "plain fit error {e_plain}");
@@ -346,17 +461,44 @@ mod tests {
         let mut inl = vec![true; all.len()];
         inl[5] = false;
         let mut w = Vec::new();
-        let p = precision_fit(&all, &inl, &vp, 1e-5, &mut w, &mut Vec::new()).unwrap();
+        let p = precision_fit(
+            &all,
+            &inl,
+            &vp,
+            1e-5,
+            EDGE_PAIR_FACTOR,
+            &mut w,
+            &mut Vec::new(),
+        )
+        .unwrap();
         assert_eq!(w[5], 0.0);
         assert!(axis_angle(&p.direction, &vp) < 2e-4, "{p:?}");
         // Two Hough rows only: their σ comes from the residual about the edge fit.
         assert!(p.sigma_hough < p.sigma_edge, "{p:?}");
         // One method alone: no refit.
         let hough_only = &all[..2];
-        assert!(precision_fit(hough_only, &inl[..2], &vp, 1e-5, &mut w, &mut Vec::new()).is_none());
+        assert!(precision_fit(
+            hough_only,
+            &inl[..2],
+            &vp,
+            1e-5,
+            EDGE_PAIR_FACTOR,
+            &mut w,
+            &mut Vec::new()
+        )
+        .is_none());
         assert!(w.is_empty());
         // Mismatched lengths: no refit.
-        assert!(precision_fit(&all, &inl[..3], &vp, 1e-5, &mut w, &mut Vec::new()).is_none());
+        assert!(precision_fit(
+            &all,
+            &inl[..3],
+            &vp,
+            1e-5,
+            EDGE_PAIR_FACTOR,
+            &mut w,
+            &mut Vec::new()
+        )
+        .is_none());
     }
 
     #[test]
@@ -384,7 +526,16 @@ mod tests {
         }
         let e_plain = axis_angle(&plain.fit().unwrap().normal, &vp);
         let mut w = Vec::new();
-        let p = precision_fit(&all, &inl, &vp, 1e-5, &mut w, &mut Vec::new()).unwrap();
+        let p = precision_fit(
+            &all,
+            &inl,
+            &vp,
+            1e-5,
+            EDGE_PAIR_FACTOR,
+            &mut w,
+            &mut Vec::new(),
+        )
+        .unwrap();
         let e = axis_angle(&p.direction, &vp);
         assert!(e_plain > 5e-4, "plain {e_plain}");
         assert!(e < 1.5e-4, "robust {e} (plain {e_plain})");
@@ -426,5 +577,68 @@ mod tests {
         assert_eq!(d.score(), 0.0);
         assert!(c.score() > d.score());
         assert_eq!(consensus_score(&[], &vp, tol), Consensus::default());
+    }
+
+    #[test]
+    fn boundary_pairs_straddling_a_hough_row_become_its_centre_line() {
+        let vp = Vector3::new(0.1, 0.9, -0.2).normalize();
+        let mut all = rows(&vp, Method::Hough, &[(0.3, 0.0, 900), (1.0, 0.0, 800)]);
+        // Row at 0.3: two long boundaries biased in opposite directions, and a short stray
+        // section between them; row at 1.0: one boundary only.
+        all.extend(rows(
+            &vp,
+            Method::Edge,
+            &[
+                (0.27, 2e-4, 400),
+                (0.33, -2e-4, 380),
+                (0.31, 3e-3, 20),
+                (1.04, 1e-4, 300),
+            ],
+        ));
+        // Far from both Hough rows: never paired.
+        all.extend(rows(
+            &vp,
+            Method::Edge,
+            &[(2.0, 0.0, 500), (2.05, 0.0, 500)],
+        ));
+        let inl = vec![true; all.len()];
+        let (mut out, mut out_inl, mut psi) = (Vec::new(), Vec::new(), Vec::new());
+        let k = pair_edge_rows(
+            &all,
+            &inl,
+            &vp,
+            5f64.to_radians(),
+            &mut out,
+            &mut out_inl,
+            &mut psi,
+        );
+        assert_eq!(k, 1);
+        assert_eq!(out.len(), 3);
+        assert_eq!(out_inl, vec![true; 3]);
+        assert!(out[..2].iter().all(|r| r.method == Method::Hough));
+        let c = out[2];
+        assert_eq!((c.method, c.support), (Method::Edge, 780));
+        // The opposite biases cancel (to the supports' imbalance, not weighted here).
+        assert!(c.normal.dot(&vp).abs() < 1e-5, "{}", c.normal.dot(&vp));
+        // Rejected rows take no part; mismatched lengths give nothing.
+        let mut inl2 = inl.clone();
+        inl2[4] = false;
+        assert_eq!(
+            pair_edge_rows(&all, &inl2, &vp, 0.1, &mut out, &mut out_inl, &mut psi),
+            1
+        );
+        assert_eq!(out.len(), 3);
+        assert_eq!(out[2].support, 780);
+        // Without its left boundary, the row has no pair.
+        inl2[2] = false;
+        assert_eq!(
+            pair_edge_rows(&all, &inl2, &vp, 0.1, &mut out, &mut out_inl, &mut psi),
+            0
+        );
+        assert_eq!(
+            pair_edge_rows(&all, &inl[..3], &vp, 0.1, &mut out, &mut out_inl, &mut psi),
+            0
+        );
+        assert!(out.is_empty());
     }
 }

@@ -11,7 +11,7 @@
 //! (paper II-F, eq. 5: edge rows weighted w·support, Hough rows (1−w)·support, in one
 //! vanishing-point Hough).
 
-use super::combine::{consensus_score, precision_fit};
+use super::combine::{consensus_score, pair_edge_rows, precision_fit, EDGE_PAIR_FACTOR};
 use super::edge::{EdgeDetector, EdgeError, EdgeOptions, EdgeResult};
 use super::hough::{HoughOptions, HoughResult, HoughRows};
 use super::mask::{build_mask, find_fov, MaskOptions, MaskResult};
@@ -86,6 +86,15 @@ pub struct CombinedOptions {
     /// bent, many edge boundaries agreeing with some Hough rows would otherwise be outvoted.
     /// Default true.
     pub consensus: bool,
+    /// In the final fit of the combined method, replace the edge method's two boundary
+    /// lines of a crop row by their centre line where a Hough row lies between them (see
+    /// [`super::combine::pair_edge_rows`]); unpaired edge rows are then left out of the fit.
+    /// The boundaries' errors largely cancel in the centre line. Default true.
+    pub pair_edge_rows: bool,
+    /// The largest angle (degrees, around the vanishing point) between a Hough row and an
+    /// edge boundary paired with it. Default 5 (the half-width of a crop row seen from the
+    /// camera is a few degrees; neighbouring rows are farther apart).
+    pub pair_max_deg: f64,
 }
 
 impl Default for CombinedOptions {
@@ -95,6 +104,8 @@ impl Default for CombinedOptions {
             precision_weighting: true,
             precision_floor_mrad: 0.02,
             consensus: true,
+            pair_edge_rows: true,
+            pair_max_deg: 5.0,
         }
     }
 }
@@ -549,6 +560,9 @@ pub struct Detector {
     candidate_weights: Vec<f64>,
     candidate_inliers: Vec<bool>,
     final_inliers: Vec<bool>,
+    paired_rows: Vec<Row>,
+    paired_inliers: Vec<bool>,
+    pair_scratch: Vec<(f64, usize, bool)>,
     times: StageTimes,
     last_prepare: PrepareResult,
     last_hough: HoughResult,
@@ -561,6 +575,12 @@ impl Detector {
         if !(w > 0.0 && w < 1.0) {
             return Err(DetectError::Options(format!(
                 "combined.edge_weight = {w} must be within (0, 1)"
+            )));
+        }
+        let p = opts.combined.pair_max_deg;
+        if !(p > 0.0 && p < 45.0) {
+            return Err(DetectError::Options(format!(
+                "combined.pair_max_deg = {p} must be within (0, 45)"
             )));
         }
         let f = opts.combined.precision_floor_mrad;
@@ -588,6 +608,9 @@ impl Detector {
             candidate_weights: Vec::with_capacity(128),
             candidate_inliers: Vec::with_capacity(128),
             final_inliers: Vec::with_capacity(128),
+            paired_rows: Vec::with_capacity(128),
+            paired_inliers: Vec::with_capacity(128),
+            pair_scratch: Vec::with_capacity(128),
             times: StageTimes::default(),
             last_prepare: PrepareResult::default(),
             last_hough: HoughResult::default(),
@@ -683,12 +706,28 @@ impl Detector {
             return;
         };
         let floor = self.opts.combined.precision_floor_mrad * 1e-3;
-        let inliers = &self.final_inliers;
+        let paired = self.opts.method == Method::Combined
+            && self.opts.combined.pair_edge_rows
+            && pair_edge_rows(
+                &out.rows,
+                &self.final_inliers,
+                &vp.direction,
+                self.opts.combined.pair_max_deg.to_radians(),
+                &mut self.paired_rows,
+                &mut self.paired_inliers,
+                &mut self.pair_scratch,
+            ) > 0;
+        let (rows, inliers, edge_factor) = if paired {
+            (&self.paired_rows[..], &self.paired_inliers[..], 1.0)
+        } else {
+            (&out.rows[..], &self.final_inliers[..], EDGE_PAIR_FACTOR)
+        };
         let Some(fit) = precision_fit(
-            &out.rows,
+            rows,
             inliers,
             &vp.direction,
             floor,
+            edge_factor,
             &mut self.precision_weights,
             &mut self.precision_scratch,
         ) else {
