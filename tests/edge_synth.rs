@@ -111,15 +111,19 @@ fn pal_rows_and_vanishing_point() {
     check_lens("pal", ideal_pal(512, 612), 12);
 }
 
-/// Table I protocol (paper IV-A), fixed seeds, at 1224×1025 (the working resolution of a binned
-/// GC2450C frame): the edge method finds every vanishing point with a modest error, and the
-/// combined method is accurate and no worse than the better single method (loose margins; the
-/// full figures come from `omnirow eval` and `examples/methods_eval.rs`).
+/// Table I protocol (paper IV-A), fixed seeds, on full 2448×2050 GC2450C frames (binned by the
+/// detector to its 1224×1025 working resolution, as `omnirow eval` runs it): the edge method
+/// finds every vanishing point with a modest error, and the combined method is accurate and
+/// no worse than the better single method (loose margins; the full figures come from
+/// `omnirow eval`). Images rendered directly at 1224×1025 are not used here: without the
+/// binning's averaging their row boundaries are aliased, and the combined method's pairing of
+/// boundaries into centre lines gains nothing there (20 images per lens with
+/// `examples/methods_eval.rs`: combined 0.104/0.088 mrad against Hough 0.107/0.081).
 #[test]
 fn table1_quick_edge_and_combined() {
     for (name, cal) in [
-        ("fisheye", ideal_fisheye(1025, 1224)),
-        ("pal", ideal_pal(1025, 1224)),
+        ("fisheye", ideal_fisheye(2050, 2448)),
+        ("pal", ideal_pal(2050, 2448)),
     ] {
         let mut errs = [Vec::new(), Vec::new(), Vec::new()];
         let methods = [Method::Hough, Method::Edge, Method::Combined];
@@ -139,14 +143,16 @@ fn table1_quick_edge_and_combined() {
         eprintln!(
             "{name}: mean VP error hough {hough:.3} edge {edge:.3} combined {comb:.3} mrad; {errs:?}"
         );
-        assert!(edge < 0.8, "{name} edge: {errs:?}");
+        // Measured (seeds 1-4): fisheye hough 0.031, edge 0.093, combined 0.025 mrad; pal
+        // 0.048, 0.099, 0.040.
+        assert!(edge < 0.25, "{name} edge: {errs:?}");
         assert!(
-            errs[2].iter().all(|&e| e < 0.4),
+            errs[2].iter().all(|&e| e < 0.15),
             "{name} combined: {errs:?}"
         );
-        assert!(comb < 0.2, "{name} combined: {errs:?}");
+        assert!(comb < 0.06, "{name} combined: {errs:?}");
         assert!(
-            comb <= 1.15 * hough.min(edge),
+            comb <= 1.05 * hough.min(edge),
             "{name}: combined {comb} worse than the better single method ({hough}, {edge})"
         );
     }

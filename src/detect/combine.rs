@@ -33,6 +33,8 @@ pub struct PrecisionFit {
     /// inlier rows).
     pub sigma_hough: f64,
     pub sigma_edge: f64,
+    /// The same for the centre lines of paired edge boundaries ([`pair_edge_rows`]).
+    pub sigma_paired: f64,
 }
 
 /// Cauchy constant, in units of the method's robust scatter. Wider than the textbook 2.385
@@ -60,7 +62,9 @@ fn slot(m: Method) -> Option<usize> {
     match m {
         Method::Hough => Some(0),
         Method::Edge => Some(1),
-        Method::Combined => None,
+        // Centre lines of paired edge boundaries (see [`pair_edge_rows`]): a class of
+        // their own, with their own scatter.
+        Method::Combined => Some(2),
     }
 }
 
@@ -144,21 +148,21 @@ pub fn precision_fit(
     if rows.len() != inliers.len() {
         return None;
     }
-    let mut stats = [MethodStats::default(); 2];
+    let mut stats = [MethodStats::default(); 3];
     for (r, _) in rows.iter().zip(inliers).filter(|(_, &ok)| ok) {
         let Some(k) = slot(r.method) else { continue };
         stats[k].support += r.support as f64;
         stats[k].count += 1;
     }
-    if stats[0].count + stats[1].count < 3 {
+    if stats.iter().map(|s| s.count).sum::<usize>() < 3 {
         return None;
     }
     let buf = scratch;
     // Each method's own robust direction (three or more rows) and its scatter: the weighted
     // median residual about it (MAD scale), corrected for the two degrees of freedom the
     // direction absorbs. Fewer rows: the residual about the other method's direction.
-    let mut own: [Option<Vector3<f64>>; 2] = [None, None];
-    for k in 0..2 {
+    let mut own: [Option<Vector3<f64>>; 3] = [None, None, None];
+    for k in 0..3 {
         if stats[k].count >= 3 {
             let m0 = weighted_median_abs(rows, inliers, k, v0, buf);
             let s0 = (1.4826 * m0).max(floor_rad);
@@ -166,9 +170,14 @@ pub fn precision_fit(
             own[k] = irls(rows, inliers, Some(k), v0, &sup, &|_| s0);
         }
     }
-    for k in 0..2 {
+    for k in 0..3 {
         let n = stats[k].count as f64;
-        let (reference, dof_scale) = match (own[k], own[1 - k]) {
+        // Another class's own direction: the Hough rows' first, as the most precise.
+        let other = [0, 2, 1]
+            .into_iter()
+            .filter(|&j| j != k)
+            .find_map(|j| own[j]);
+        let (reference, dof_scale) = match (own[k], other) {
             (Some(v), _) => (v, (n / (n - 2.0)).sqrt()),
             (None, Some(v)) => (v, 1.0),
             (None, None) => (*v0, 1.0),
@@ -216,6 +225,7 @@ pub fn precision_fit(
         residual_rad,
         sigma_hough: stats[0].sigma,
         sigma_edge: stats[1].sigma,
+        sigma_paired: stats[2].sigma,
     })
 }
 
@@ -227,10 +237,10 @@ pub fn precision_fit(
 /// (the normalised sum of the two normals, signs aligned), which still contains the
 /// vanishing point, and whose error is the mean of the two boundaries' (the boundaries of
 /// one row are biased in opposite directions by the plants' width and the smoothing, so the
-/// mean cancels most of it). The centre lines are written to `out` as edge rows with the
-/// pair's summed support, after a copy of every Hough row; `out_inliers` flags them (and
-/// the Hough rows as `inliers` did). Unpaired edge rows are left out. Returns the number of
-/// pairs. Work buffers are the caller's (`psi`), so that a warmed-up caller allocates
+/// mean cancels most of it). `out` receives every Hough row, then the centre lines (method
+/// [`Method::Combined`], a class of their own in [`precision_fit`], with the pair's summed
+/// support), then the unpaired edge rows; `out_inliers` flags them (centre lines as inliers,
+/// the others as `inliers` did). Returns the number of pairs. Work buffers are the caller's (`psi`), so that a warmed-up caller allocates
 /// nothing.
 #[allow(clippy::too_many_arguments)]
 pub fn pair_edge_rows(
@@ -240,7 +250,7 @@ pub fn pair_edge_rows(
     max_half_rad: f64,
     out: &mut Vec<Row>,
     out_inliers: &mut Vec<bool>,
-    psi: &mut Vec<(f64, usize, bool)>,
+    psi: &mut Vec<(f64, usize, Kind)>,
 ) -> usize {
     out.clear();
     out_inliers.clear();
@@ -265,10 +275,15 @@ pub fn pair_edge_rows(
         }
     };
     for (i, r) in rows.iter().enumerate() {
-        if inliers[i] && r.method != Method::Combined {
-            psi.push((angle(&r.normal), i, r.method == Method::Hough));
+        let kind = match r.method {
+            Method::Hough => Kind::Hough,
+            Method::Edge => Kind::Edge,
+            Method::Combined => continue,
+        };
+        if inliers[i] {
+            psi.push((angle(&r.normal), i, kind));
         }
-        if r.method == Method::Hough {
+        if kind == Kind::Hough {
             out.push(*r);
             out_inliers.push(inliers[i]);
         }
@@ -276,23 +291,23 @@ pub fn pair_edge_rows(
     let n = psi.len();
     let mut pairs = 0;
     for h in 0..n {
-        let (ph, _, is_hough) = psi[h];
-        if !is_hough {
+        let (ph, _, kind) = psi[h];
+        if kind != Kind::Hough {
             continue;
         }
         // Half the way to the nearest other Hough inlier row, at most max_half_rad.
         let mut limit = max_half_rad;
-        for (p, _, hh) in psi.iter() {
+        for (p, _, k) in psi.iter() {
             let d = wrap(p - ph).abs();
-            if *hh && d > 1e-9 {
+            if *k == Kind::Hough && d > 1e-9 {
                 limit = limit.min(0.5 * d);
             }
         }
         // On each side, the boundary with the largest support (a long, exact boundary
         // rather than a short stray section nearer the centre).
         let (mut left, mut right): (Option<(u32, usize)>, Option<(u32, usize)>) = (None, None);
-        for (p, i, hh) in psi.iter() {
-            if *hh {
+        for (j, (p, i, k)) in psi.iter().enumerate() {
+            if *k != Kind::Edge {
                 continue;
             }
             let d = wrap(p - ph);
@@ -302,10 +317,11 @@ pub fn pair_edge_rows(
             let s = rows[*i].support;
             let side = if d < 0.0 { &mut left } else { &mut right };
             if side.map_or(true, |(best, _)| s > best) {
-                *side = Some((s, *i));
+                *side = Some((s, j));
             }
         }
-        if let (Some((_, l)), Some((_, r))) = (left, right) {
+        if let (Some((_, jl)), Some((_, jr))) = (left, right) {
+            let (l, r) = (psi[jl].1, psi[jr].1);
             let (nl, nr) = (rows[l].normal, rows[r].normal);
             let nr = if nl.dot(&nr) < 0.0 { -nr } else { nr };
             let c = nl + nr;
@@ -313,15 +329,33 @@ pub fn pair_edge_rows(
             if norm > 1e-12 {
                 out.push(Row {
                     normal: c / norm,
-                    method: Method::Edge,
+                    method: Method::Combined,
                     support: rows[l].support.saturating_add(rows[r].support),
                 });
                 out_inliers.push(true);
+                psi[jl].2 = Kind::Paired;
+                psi[jr].2 = Kind::Paired;
                 pairs += 1;
             }
         }
     }
+    // The unpaired edge rows keep their own class (and their inlier flags).
+    for (i, r) in rows.iter().enumerate() {
+        if r.method == Method::Edge && !psi.iter().any(|&(_, j, k)| j == i && k == Kind::Paired) {
+            out.push(*r);
+            out_inliers.push(inliers[i]);
+        }
+    }
     pairs
+}
+
+/// What [`pair_edge_rows`] made of a row.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Kind {
+    Hough,
+    Edge,
+    /// An edge boundary paired with the other boundary of its crop row.
+    Paired,
 }
 
 /// How well both methods' rows agree with a candidate vanishing point `v` (see
@@ -356,7 +390,9 @@ pub fn consensus_score(rows: &[Row], v: &Vector3<f64>, sin_tol: f64) -> Consensu
     let mut inl = [0.0f64; 2];
     let mut count = [0usize; 2];
     for r in rows {
-        let Some(k) = slot(r.method) else { continue };
+        let Some(k) = slot(r.method).filter(|&k| k < 2) else {
+            continue;
+        };
         total[k] += r.support as f64;
         if r.normal.dot(v).abs() < sin_tol {
             inl[k] += r.support as f64;
@@ -603,6 +639,8 @@ mod tests {
         ));
         let inl = vec![true; all.len()];
         let (mut out, mut out_inl, mut psi) = (Vec::new(), Vec::new(), Vec::new());
+        // The centre line and its class in the fit.
+        assert_eq!(slot(Method::Combined), Some(2));
         let k = pair_edge_rows(
             &all,
             &inl,
@@ -613,11 +651,13 @@ mod tests {
             &mut psi,
         );
         assert_eq!(k, 1);
-        assert_eq!(out.len(), 3);
-        assert_eq!(out_inl, vec![true; 3]);
+        // Two Hough rows, one centre line, four unpaired edge rows.
+        assert_eq!(out.len(), 7);
+        assert_eq!(out_inl, vec![true; 7]);
         assert!(out[..2].iter().all(|r| r.method == Method::Hough));
+        assert!(out[3..].iter().all(|r| r.method == Method::Edge));
         let c = out[2];
-        assert_eq!((c.method, c.support), (Method::Edge, 780));
+        assert_eq!((c.method, c.support), (Method::Combined, 780));
         // The opposite biases cancel (to the supports' imbalance, not weighted here).
         assert!(c.normal.dot(&vp).abs() < 1e-5, "{}", c.normal.dot(&vp));
         // Rejected rows take no part; mismatched lengths give nothing.
@@ -627,7 +667,8 @@ mod tests {
             pair_edge_rows(&all, &inl2, &vp, 0.1, &mut out, &mut out_inl, &mut psi),
             1
         );
-        assert_eq!(out.len(), 3);
+        assert_eq!(out.len(), 7);
+        assert!(!out_inl[3]);
         assert_eq!(out[2].support, 780);
         // Without its left boundary, the row has no pair.
         inl2[2] = false;

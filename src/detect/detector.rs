@@ -88,7 +88,8 @@ pub struct CombinedOptions {
     pub consensus: bool,
     /// In the final fit of the combined method, replace the edge method's two boundary
     /// lines of a crop row by their centre line where a Hough row lies between them (see
-    /// [`super::combine::pair_edge_rows`]); unpaired edge rows are then left out of the fit.
+    /// [`super::combine::pair_edge_rows`]); the centre lines are weighted as a class of
+    /// their own, by their own measured scatter, beside the Hough and the unpaired edge rows.
     /// The boundaries' errors largely cancel in the centre line. Default true.
     pub pair_edge_rows: bool,
     /// The largest angle (degrees, around the vanishing point) between a Hough row and an
@@ -562,7 +563,7 @@ pub struct Detector {
     final_inliers: Vec<bool>,
     paired_rows: Vec<Row>,
     paired_inliers: Vec<bool>,
-    pair_scratch: Vec<(f64, usize, bool)>,
+    pair_scratch: Vec<(f64, usize, super::combine::Kind)>,
     times: StageTimes,
     last_prepare: PrepareResult,
     last_hough: HoughResult,
@@ -717,17 +718,17 @@ impl Detector {
                 &mut self.paired_inliers,
                 &mut self.pair_scratch,
             ) > 0;
-        let (rows, inliers, edge_factor) = if paired {
-            (&self.paired_rows[..], &self.paired_inliers[..], 1.0)
+        let (rows, inliers) = if paired {
+            (&self.paired_rows[..], &self.paired_inliers[..])
         } else {
-            (&out.rows[..], &self.final_inliers[..], EDGE_PAIR_FACTOR)
+            (&out.rows[..], &self.final_inliers[..])
         };
         let Some(fit) = precision_fit(
             rows,
             inliers,
             &vp.direction,
             floor,
-            edge_factor,
+            EDGE_PAIR_FACTOR,
             &mut self.precision_weights,
             &mut self.precision_scratch,
         ) else {
