@@ -96,6 +96,11 @@ pub struct CombinedOptions {
     /// edge boundary paired with it. Default 5 (the half-width of a crop row seen from the
     /// camera is a few degrees; neighbouring rows are farther apart).
     pub pair_max_deg: f64,
+    /// The combined method reports only the edge rows consistent with its vanishing point
+    /// (within `vanishing.inlier_deg`); the Hough rows are all reported, as by the Hough
+    /// method. The edge method's boundaries of sparse rows are mostly stray plant outlines,
+    /// which would otherwise count as wrong rows. Default true.
+    pub reject_edge_outliers: bool,
 }
 
 impl Default for CombinedOptions {
@@ -107,6 +112,7 @@ impl Default for CombinedOptions {
             consensus: true,
             pair_edge_rows: true,
             pair_max_deg: 5.0,
+            reject_edge_outliers: true,
         }
     }
 }
@@ -689,6 +695,13 @@ impl Detector {
         }
         if method != Method::Hough && self.opts.combined.precision_weighting {
             self.refit_by_precision(out);
+        }
+        if method == Method::Combined && self.opts.combined.reject_edge_outliers {
+            let sin_tol = self.opts.vanishing.inlier_deg.to_radians().sin();
+            let v = out.vanishing_point.map(|v| v.direction);
+            out.rows.retain(|r| {
+                r.method != Method::Edge || v.is_some_and(|v| r.normal.dot(&v).abs() < sin_tol)
+            });
         }
         let t4 = Instant::now();
         self.times = StageTimes {
