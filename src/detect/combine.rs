@@ -305,7 +305,9 @@ pub fn pair_edge_rows(
         }
         // On each side, the boundary with the largest support (a long, exact boundary
         // rather than a short stray section nearer the centre).
-        let (mut left, mut right): (Option<(u32, usize)>, Option<(u32, usize)>) = (None, None);
+        // (support, index into psi) of the best boundary on each side.
+        let mut left: Option<(u32, usize)> = None;
+        let mut right: Option<(u32, usize)> = None;
         for (j, (p, i, k)) in psi.iter().enumerate() {
             if *k != Kind::Edge {
                 continue;
