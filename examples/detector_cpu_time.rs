@@ -4,6 +4,9 @@
 //! `cargo bench --bench edge`, whose wall-clock figures are only meaningful on an idle machine.
 //!
 //! `cargo run --release --example detector_cpu_time -- [frames]`
+//!
+//! `OMNIROW_DETECTOR`: detector options as TOML (e.g. `[combined]` settings), to compare
+//! settings in one run.
 use omnirow::camera::{ideal_fisheye, ideal_pal};
 use omnirow::detect::{Detection, Detector, DetectorOptions, Method};
 use omnirow::frame::ImageView;
@@ -33,14 +36,10 @@ fn main() {
         let (img, _) = render(&cal, &random_scene(7, Protocol::Table1), 7).unwrap();
         let view = ImageView::new(img.width, img.height, img.format, &img.data).unwrap();
         for method in [Method::Hough, Method::Edge, Method::Combined] {
-            let mut det = Detector::new(
-                &cal,
-                DetectorOptions {
-                    method,
-                    ..Default::default()
-                },
-            )
-            .unwrap();
+            let base: DetectorOptions = std::env::var("OMNIROW_DETECTOR")
+                .map(|t| toml::from_str(&t).unwrap())
+                .unwrap_or_default();
+            let mut det = Detector::new(&cal, DetectorOptions { method, ..base }).unwrap();
             let mut out = Detection::default();
             det.process(&view, &mut out).unwrap();
             let mut t = Vec::new();

@@ -111,15 +111,19 @@ fn pal_rows_and_vanishing_point() {
     check_lens("pal", ideal_pal(512, 612), 12);
 }
 
-/// Table I protocol (paper IV-A), fixed seeds, at 1224×1025 (the working resolution of a binned
-/// GC2450C frame): the edge method finds every vanishing point with a modest error, and the
-/// combined method is accurate and no worse than the better single method (loose margins; the
-/// full figures come from `omnirow eval` and `examples/methods_eval.rs`).
+/// Table I protocol (paper IV-A), fixed seeds, on full 2448×2050 GC2450C frames (binned by the
+/// detector to its 1224×1025 working resolution, as `omnirow eval` runs it): the edge method
+/// finds every vanishing point with a modest error, and the combined method is accurate and
+/// no worse than the better single method (loose margins; the full figures come from
+/// `omnirow eval`). Images rendered directly at 1224×1025 are not used here: without the
+/// binning's averaging their row boundaries are aliased, and the combined method's pairing of
+/// boundaries into centre lines gains nothing there (20 images per lens with
+/// `examples/methods_eval.rs`: combined 0.104/0.088 mrad against Hough 0.107/0.081).
 #[test]
 fn table1_quick_edge_and_combined() {
     for (name, cal) in [
-        ("fisheye", ideal_fisheye(1025, 1224)),
-        ("pal", ideal_pal(1025, 1224)),
+        ("fisheye", ideal_fisheye(2050, 2448)),
+        ("pal", ideal_pal(2050, 2448)),
     ] {
         let mut errs = [Vec::new(), Vec::new(), Vec::new()];
         let methods = [Method::Hough, Method::Edge, Method::Combined];
@@ -139,15 +143,69 @@ fn table1_quick_edge_and_combined() {
         eprintln!(
             "{name}: mean VP error hough {hough:.3} edge {edge:.3} combined {comb:.3} mrad; {errs:?}"
         );
-        assert!(edge < 0.8, "{name} edge: {errs:?}");
+        // Measured (seeds 1-4): fisheye hough 0.031, edge 0.093, combined 0.025 mrad; pal
+        // 0.048, 0.099, 0.040.
+        assert!(edge < 0.25, "{name} edge: {errs:?}");
         assert!(
-            errs[2].iter().all(|&e| e < 0.4),
+            errs[2].iter().all(|&e| e < 0.15),
             "{name} combined: {errs:?}"
         );
-        assert!(comb < 0.2, "{name} combined: {errs:?}");
+        assert!(comb < 0.06, "{name} combined: {errs:?}");
         assert!(
-            comb <= 1.15 * hough.min(edge),
+            comb <= 1.05 * hough.min(edge),
             "{name}: combined {comb} worse than the better single method ({hough}, {edge})"
         );
     }
+}
+
+/// Table II protocol (paper IV-A, heavy noise), fixed seeds, at 1224×1025: the combined
+/// method fails on no more images than either single method on each lens (the full figures
+/// come from `omnirow eval`; a failure is a vanishing point missing or more than 1° off).
+#[test]
+fn table2_quick_combined_fails_least() {
+    let methods = [Method::Hough, Method::Edge, Method::Combined];
+    let mut sums = [0usize; 3];
+    for (name, cal) in [
+        ("fisheye", ideal_fisheye(1025, 1224)),
+        ("pal", ideal_pal(1025, 1224)),
+    ] {
+        let mut dets: Vec<Detector> = methods
+            .iter()
+            .map(|&m| {
+                Detector::new(
+                    &cal,
+                    DetectorOptions {
+                        method: m,
+                        ..Default::default()
+                    },
+                )
+                .unwrap()
+            })
+            .collect();
+        let mut fails = [0usize; 3];
+        for seed in 1..=12 {
+            let (img, truth) = render(&cal, &random_scene(seed, Protocol::Table2), seed).unwrap();
+            let view = ImageView::new(img.width, img.height, img.format, &img.data).unwrap();
+            let vp = Vector3::from(truth.vp_along);
+            for (k, d) in dets.iter_mut().enumerate() {
+                let mut out = Detection::default();
+                d.process(&view, &mut out).unwrap();
+                let e = out
+                    .vanishing_point
+                    .map_or(f64::INFINITY, |v| axis_angle(&v.direction, &vp));
+                fails[k] += (e > 1f64.to_radians()) as usize;
+            }
+        }
+        eprintln!("{name}: Table II failures of 12 (hough, edge, combined) {fails:?}");
+        assert!(
+            fails[2] <= fails[0].min(fails[1]),
+            "{name}: combined fails more than a single method: {fails:?}"
+        );
+        // The protocol is hard: the edge method fails on most images.
+        assert!(fails[1] >= 6, "{name}: {fails:?}");
+        for k in 0..3 {
+            sums[k] += fails[k];
+        }
+    }
+    assert!(sums[2] <= sums[0] && sums[0] < sums[1], "{sums:?}");
 }

@@ -33,6 +33,8 @@ pub struct PrecisionFit {
     /// inlier rows).
     pub sigma_hough: f64,
     pub sigma_edge: f64,
+    /// The same for the centre lines of paired edge boundaries ([`pair_edge_rows`]).
+    pub sigma_paired: f64,
 }
 
 /// Cauchy constant, in units of the method's robust scatter. Wider than the textbook 2.385
@@ -44,7 +46,7 @@ const CAUCHY: f64 = 4.0;
 /// a crop row counts about once, as its Hough centre line does. Measured on Table I (40
 /// images per lens, 1224×1025): 1.0 let the edge rows' common bias pull the fisheye answer
 /// past the Hough one on some seeds; 0.5 keeps the combined method the better on both lenses.
-const EDGE_PAIR_FACTOR: f64 = 0.5;
+pub const EDGE_PAIR_FACTOR: f64 = 0.5;
 /// Reweighting iterations of the final fit.
 const ITERATIONS: usize = 6;
 
@@ -60,7 +62,9 @@ fn slot(m: Method) -> Option<usize> {
     match m {
         Method::Hough => Some(0),
         Method::Edge => Some(1),
-        Method::Combined => None,
+        // Centre lines of paired edge boundaries (see [`pair_edge_rows`]): a class of
+        // their own, with their own scatter.
+        Method::Combined => Some(2),
     }
 }
 
@@ -136,6 +140,7 @@ pub fn precision_fit(
     inliers: &[bool],
     v0: &Vector3<f64>,
     floor_rad: f64,
+    edge_factor: f64,
     weights: &mut Vec<f64>,
     scratch: &mut Vec<(f64, f64)>,
 ) -> Option<PrecisionFit> {
@@ -143,21 +148,21 @@ pub fn precision_fit(
     if rows.len() != inliers.len() {
         return None;
     }
-    let mut stats = [MethodStats::default(); 2];
+    let mut stats = [MethodStats::default(); 3];
     for (r, _) in rows.iter().zip(inliers).filter(|(_, &ok)| ok) {
         let Some(k) = slot(r.method) else { continue };
         stats[k].support += r.support as f64;
         stats[k].count += 1;
     }
-    if stats[0].count + stats[1].count < 3 {
+    if stats.iter().map(|s| s.count).sum::<usize>() < 3 {
         return None;
     }
     let buf = scratch;
     // Each method's own robust direction (three or more rows) and its scatter: the weighted
     // median residual about it (MAD scale), corrected for the two degrees of freedom the
     // direction absorbs. Fewer rows: the residual about the other method's direction.
-    let mut own: [Option<Vector3<f64>>; 2] = [None, None];
-    for k in 0..2 {
+    let mut own: [Option<Vector3<f64>>; 3] = [None, None, None];
+    for k in 0..3 {
         if stats[k].count >= 3 {
             let m0 = weighted_median_abs(rows, inliers, k, v0, buf);
             let s0 = (1.4826 * m0).max(floor_rad);
@@ -165,9 +170,14 @@ pub fn precision_fit(
             own[k] = irls(rows, inliers, Some(k), v0, &sup, &|_| s0);
         }
     }
-    for k in 0..2 {
+    for k in 0..3 {
         let n = stats[k].count as f64;
-        let (reference, dof_scale) = match (own[k], own[1 - k]) {
+        // Another class's own direction: the Hough rows' first, as the most precise.
+        let other = [0, 2, 1]
+            .into_iter()
+            .filter(|&j| j != k)
+            .find_map(|j| own[j]);
+        let (reference, dof_scale) = match (own[k], other) {
             (Some(v), _) => (v, (n / (n - 2.0)).sqrt()),
             (None, Some(v)) => (v, 1.0),
             (None, None) => (*v0, 1.0),
@@ -181,7 +191,7 @@ pub fn precision_fit(
         match slot(rows[i].method) {
             Some(k) if inliers[i] => {
                 let s = &stats[k];
-                let f = if k == 1 { EDGE_PAIR_FACTOR } else { 1.0 };
+                let f = if k == 1 { edge_factor } else { 1.0 };
                 f * rows[i].support as f64 / (s.support / s.count as f64) / (s.sigma * s.sigma)
             }
             _ => 0.0,
@@ -215,7 +225,195 @@ pub fn precision_fit(
         residual_rad,
         sigma_hough: stats[0].sigma,
         sigma_edge: stats[1].sigma,
+        sigma_paired: stats[2].sigma,
     })
+}
+
+/// Pairs the edge method's two boundary lines of a crop row into one centre line, using the
+/// Hough rows as the crop rows' centres ("edge rows only where they agree with Hough's
+/// structure"). For each Hough inlier row, the edge inlier row of largest support on either side of it
+/// (around the vanishing point `vp`), each within `max_half_rad` and within half the way to
+/// the neighbouring Hough inlier row, form a pair; its centre line is the bisecting plane
+/// (the normalised sum of the two normals, signs aligned), which still contains the
+/// vanishing point, and whose error is the mean of the two boundaries' (the boundaries of
+/// one row are biased in opposite directions by the plants' width and the smoothing, so the
+/// mean cancels most of it). `out` receives every Hough row, then the centre lines (method
+/// [`Method::Combined`], a class of their own in [`precision_fit`], with the pair's summed
+/// support), then the unpaired edge rows; `out_inliers` flags them (centre lines as inliers,
+/// the others as `inliers` did). Returns the number of pairs. Work buffers are the caller's (`psi`), so that a warmed-up caller allocates
+/// nothing.
+#[allow(clippy::too_many_arguments)]
+pub fn pair_edge_rows(
+    rows: &[Row],
+    inliers: &[bool],
+    vp: &Vector3<f64>,
+    max_half_rad: f64,
+    out: &mut Vec<Row>,
+    out_inliers: &mut Vec<bool>,
+    psi: &mut Vec<(f64, usize, Kind)>,
+) -> usize {
+    out.clear();
+    out_inliers.clear();
+    psi.clear();
+    if rows.len() != inliers.len() {
+        return 0;
+    }
+    let a = crate::sphere::any_perpendicular(vp);
+    let b = vp.cross(&a);
+    // Angle of a normal around the vanishing point, modulo π (the sign is free).
+    let angle = |n: &Vector3<f64>| -> f64 {
+        let t = n.dot(&b).atan2(n.dot(&a));
+        t.rem_euclid(std::f64::consts::PI)
+    };
+    let wrap = |d: f64| -> f64 {
+        let pi = std::f64::consts::PI;
+        let d = d.rem_euclid(pi);
+        if d > 0.5 * pi {
+            d - pi
+        } else {
+            d
+        }
+    };
+    for (i, r) in rows.iter().enumerate() {
+        let kind = match r.method {
+            Method::Hough => Kind::Hough,
+            Method::Edge => Kind::Edge,
+            Method::Combined => continue,
+        };
+        if inliers[i] {
+            psi.push((angle(&r.normal), i, kind));
+        }
+        if kind == Kind::Hough {
+            out.push(*r);
+            out_inliers.push(inliers[i]);
+        }
+    }
+    let n = psi.len();
+    let mut pairs = 0;
+    for h in 0..n {
+        let (ph, _, kind) = psi[h];
+        if kind != Kind::Hough {
+            continue;
+        }
+        // Half the way to the nearest other Hough inlier row, at most max_half_rad.
+        let mut limit = max_half_rad;
+        for (p, _, k) in psi.iter() {
+            let d = wrap(p - ph).abs();
+            if *k == Kind::Hough && d > 1e-9 {
+                limit = limit.min(0.5 * d);
+            }
+        }
+        // On each side, the boundary with the largest support (a long, exact boundary
+        // rather than a short stray section nearer the centre).
+        // (support, index into psi) of the best boundary on each side.
+        let mut left: Option<(u32, usize)> = None;
+        let mut right: Option<(u32, usize)> = None;
+        for (j, (p, i, k)) in psi.iter().enumerate() {
+            if *k != Kind::Edge {
+                continue;
+            }
+            let d = wrap(p - ph);
+            if d.abs() >= limit {
+                continue;
+            }
+            let s = rows[*i].support;
+            let side = if d < 0.0 { &mut left } else { &mut right };
+            if side.map_or(true, |(best, _)| s > best) {
+                *side = Some((s, j));
+            }
+        }
+        if let (Some((_, jl)), Some((_, jr))) = (left, right) {
+            let (l, r) = (psi[jl].1, psi[jr].1);
+            let (nl, nr) = (rows[l].normal, rows[r].normal);
+            let nr = if nl.dot(&nr) < 0.0 { -nr } else { nr };
+            let c = nl + nr;
+            let norm = c.norm();
+            if norm > 1e-12 {
+                out.push(Row {
+                    normal: c / norm,
+                    method: Method::Combined,
+                    support: rows[l].support.saturating_add(rows[r].support),
+                });
+                out_inliers.push(true);
+                psi[jl].2 = Kind::Paired;
+                psi[jr].2 = Kind::Paired;
+                pairs += 1;
+            }
+        }
+    }
+    // The unpaired edge rows keep their own class (and their inlier flags).
+    for (i, r) in rows.iter().enumerate() {
+        if r.method == Method::Edge && !psi.iter().any(|&(_, j, k)| j == i && k == Kind::Paired) {
+            out.push(*r);
+            out_inliers.push(inliers[i]);
+        }
+    }
+    pairs
+}
+
+/// What [`pair_edge_rows`] made of a row.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Kind {
+    Hough,
+    Edge,
+    /// An edge boundary paired with the other boundary of its crop row.
+    Paired,
+}
+
+/// How well both methods' rows agree with a candidate vanishing point `v` (see
+/// [`consensus_score`]).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Consensus {
+    /// Per method (Hough, edge): the share of the method's total support on rows within the
+    /// tolerance of `v`, times (1 − 2^(1 − inlier rows)), so that one row alone counts
+    /// nothing and two count half (as the vanishing stage's quality does).
+    pub hough: f64,
+    pub edge: f64,
+    /// Inlier rows per method (Hough, edge).
+    pub hough_rows: usize,
+    pub edge_rows: usize,
+}
+
+impl Consensus {
+    /// The score: the two methods' agreement, summed with equal weight. A vanishing point
+    /// that both methods' rows support scores higher than one only its own method's rows
+    /// support; the paper's w balances the methods' votes, but the support of one method's
+    /// rows is not comparable with the other's (edge points against accumulator weight), so
+    /// each method's agreement is measured as a share of its own rows.
+    pub fn score(&self) -> f64 {
+        self.hough + self.edge
+    }
+}
+
+/// Scores candidate vanishing point `v` by how much of each method's rows (by support) pass
+/// within `sin_tol` (the sine of the inlier tolerance) of the plane perpendicular to it.
+pub fn consensus_score(rows: &[Row], v: &Vector3<f64>, sin_tol: f64) -> Consensus {
+    let mut total = [0.0f64; 2];
+    let mut inl = [0.0f64; 2];
+    let mut count = [0usize; 2];
+    for r in rows {
+        let Some(k) = slot(r.method).filter(|&k| k < 2) else {
+            continue;
+        };
+        total[k] += r.support as f64;
+        if r.normal.dot(v).abs() < sin_tol {
+            inl[k] += r.support as f64;
+            count[k] += 1;
+        }
+    }
+    let q = |k: usize| -> f64 {
+        if total[k] <= 0.0 || count[k] == 0 {
+            0.0
+        } else {
+            inl[k] / total[k] * (1.0 - 0.5f64.powi(count[k] as i32 - 1))
+        }
+    };
+    Consensus {
+        hough: q(0),
+        edge: q(1),
+        hough_rows: count[0],
+        edge_rows: count[1],
+    }
 }
 
 #[cfg(test)]
@@ -269,7 +467,16 @@ mod tests {
         }
         let e_plain = axis_angle(&plain.fit().unwrap().normal, &vp);
         let mut w = Vec::new();
-        let p = precision_fit(&all, &inl, &vp, 1e-5, &mut w, &mut Vec::new()).unwrap();
+        let p = precision_fit(
+            &all,
+            &inl,
+            &vp,
+            1e-5,
+            EDGE_PAIR_FACTOR,
+            &mut w,
+            &mut Vec::new(),
+        )
+        .unwrap();
         let e = axis_angle(&p.direction, &vp);
         assert!(e < 6e-5, "precision fit error {e}");
         assert!(e_plain > 1.5e-4, "plain fit error {e_plain}");
@@ -292,17 +499,44 @@ mod tests {
         let mut inl = vec![true; all.len()];
         inl[5] = false;
         let mut w = Vec::new();
-        let p = precision_fit(&all, &inl, &vp, 1e-5, &mut w, &mut Vec::new()).unwrap();
+        let p = precision_fit(
+            &all,
+            &inl,
+            &vp,
+            1e-5,
+            EDGE_PAIR_FACTOR,
+            &mut w,
+            &mut Vec::new(),
+        )
+        .unwrap();
         assert_eq!(w[5], 0.0);
         assert!(axis_angle(&p.direction, &vp) < 2e-4, "{p:?}");
         // Two Hough rows only: their σ comes from the residual about the edge fit.
         assert!(p.sigma_hough < p.sigma_edge, "{p:?}");
         // One method alone: no refit.
         let hough_only = &all[..2];
-        assert!(precision_fit(hough_only, &inl[..2], &vp, 1e-5, &mut w, &mut Vec::new()).is_none());
+        assert!(precision_fit(
+            hough_only,
+            &inl[..2],
+            &vp,
+            1e-5,
+            EDGE_PAIR_FACTOR,
+            &mut w,
+            &mut Vec::new()
+        )
+        .is_none());
         assert!(w.is_empty());
         // Mismatched lengths: no refit.
-        assert!(precision_fit(&all, &inl[..3], &vp, 1e-5, &mut w, &mut Vec::new()).is_none());
+        assert!(precision_fit(
+            &all,
+            &inl[..3],
+            &vp,
+            1e-5,
+            EDGE_PAIR_FACTOR,
+            &mut w,
+            &mut Vec::new()
+        )
+        .is_none());
     }
 
     #[test]
@@ -330,11 +564,124 @@ mod tests {
         }
         let e_plain = axis_angle(&plain.fit().unwrap().normal, &vp);
         let mut w = Vec::new();
-        let p = precision_fit(&all, &inl, &vp, 1e-5, &mut w, &mut Vec::new()).unwrap();
+        let p = precision_fit(
+            &all,
+            &inl,
+            &vp,
+            1e-5,
+            EDGE_PAIR_FACTOR,
+            &mut w,
+            &mut Vec::new(),
+        )
+        .unwrap();
         let e = axis_angle(&p.direction, &vp);
         assert!(e_plain > 5e-4, "plain {e_plain}");
         assert!(e < 1.5e-4, "robust {e} (plain {e_plain})");
         assert!(w[5] < 0.05 * w[0], "{w:?}");
         assert_eq!(p.sigma_hough, 0.0);
+    }
+
+    #[test]
+    fn consensus_counts_each_method_as_a_share_of_its_own_rows() {
+        let vp = Vector3::new(0.2, 0.95, -0.1).normalize();
+        let other = Vector3::new(0.9, 0.3, 0.1).normalize();
+        // Three Hough rows through vp (large support), one through `other`; four edge rows
+        // through vp (small support), one through `other`.
+        let mut all = rows(
+            &vp,
+            Method::Hough,
+            &[(0.3, 0.0, 900), (1.1, 0.0, 800), (2.0, 0.0, 700)],
+        );
+        all.extend(rows(&other, Method::Hough, &[(0.5, 0.0, 1000)]));
+        all.extend(rows(
+            &vp,
+            Method::Edge,
+            &[
+                (0.2, 0.0, 40),
+                (0.9, 0.0, 50),
+                (1.5, 0.0, 30),
+                (2.5, 0.0, 40),
+            ],
+        ));
+        all.extend(rows(&other, Method::Edge, &[(1.0, 0.0, 40)]));
+        let tol = 1f64.to_radians().sin();
+        let c = consensus_score(&all, &vp, tol);
+        assert_eq!((c.hough_rows, c.edge_rows), (3, 4));
+        assert!((c.hough - 2400.0 / 3400.0 * 0.75).abs() < 1e-9, "{c:?}");
+        assert!((c.edge - 160.0 / 200.0 * 0.875).abs() < 1e-9, "{c:?}");
+        // A direction only one row of each method passes through scores nothing.
+        let d = consensus_score(&all, &other, tol);
+        assert_eq!((d.hough_rows, d.edge_rows), (1, 1));
+        assert_eq!(d.score(), 0.0);
+        assert!(c.score() > d.score());
+        assert_eq!(consensus_score(&[], &vp, tol), Consensus::default());
+    }
+
+    #[test]
+    fn boundary_pairs_straddling_a_hough_row_become_its_centre_line() {
+        let vp = Vector3::new(0.1, 0.9, -0.2).normalize();
+        let mut all = rows(&vp, Method::Hough, &[(0.3, 0.0, 900), (1.0, 0.0, 800)]);
+        // Row at 0.3: two long boundaries biased in opposite directions, and a short stray
+        // section between them; row at 1.0: one boundary only.
+        all.extend(rows(
+            &vp,
+            Method::Edge,
+            &[
+                (0.27, 2e-4, 400),
+                (0.33, -2e-4, 380),
+                (0.31, 3e-3, 20),
+                (1.04, 1e-4, 300),
+            ],
+        ));
+        // Far from both Hough rows: never paired.
+        all.extend(rows(
+            &vp,
+            Method::Edge,
+            &[(2.0, 0.0, 500), (2.05, 0.0, 500)],
+        ));
+        let inl = vec![true; all.len()];
+        let (mut out, mut out_inl, mut psi) = (Vec::new(), Vec::new(), Vec::new());
+        // The centre line and its class in the fit.
+        assert_eq!(slot(Method::Combined), Some(2));
+        let k = pair_edge_rows(
+            &all,
+            &inl,
+            &vp,
+            5f64.to_radians(),
+            &mut out,
+            &mut out_inl,
+            &mut psi,
+        );
+        assert_eq!(k, 1);
+        // Two Hough rows, one centre line, four unpaired edge rows.
+        assert_eq!(out.len(), 7);
+        assert_eq!(out_inl, vec![true; 7]);
+        assert!(out[..2].iter().all(|r| r.method == Method::Hough));
+        assert!(out[3..].iter().all(|r| r.method == Method::Edge));
+        let c = out[2];
+        assert_eq!((c.method, c.support), (Method::Combined, 780));
+        // The opposite biases cancel (to the supports' imbalance, not weighted here).
+        assert!(c.normal.dot(&vp).abs() < 1e-5, "{}", c.normal.dot(&vp));
+        // Rejected rows take no part; mismatched lengths give nothing.
+        let mut inl2 = inl.clone();
+        inl2[4] = false;
+        assert_eq!(
+            pair_edge_rows(&all, &inl2, &vp, 0.1, &mut out, &mut out_inl, &mut psi),
+            1
+        );
+        assert_eq!(out.len(), 7);
+        assert!(!out_inl[3]);
+        assert_eq!(out[2].support, 780);
+        // Without its left boundary, the row has no pair.
+        inl2[2] = false;
+        assert_eq!(
+            pair_edge_rows(&all, &inl2, &vp, 0.1, &mut out, &mut out_inl, &mut psi),
+            0
+        );
+        assert_eq!(
+            pair_edge_rows(&all, &inl[..3], &vp, 0.1, &mut out, &mut out_inl, &mut psi),
+            0
+        );
+        assert!(out.is_empty());
     }
 }

@@ -11,7 +11,7 @@
 //! (paper II-F, eq. 5: edge rows weighted w·support, Hough rows (1−w)·support, in one
 //! vanishing-point Hough).
 
-use super::combine::precision_fit;
+use super::combine::{consensus_score, pair_edge_rows, precision_fit, EDGE_PAIR_FACTOR};
 use super::edge::{EdgeDetector, EdgeError, EdgeOptions, EdgeResult};
 use super::hough::{HoughOptions, HoughResult, HoughRows};
 use super::mask::{build_mask, find_fov, MaskOptions, MaskResult};
@@ -75,6 +75,32 @@ pub struct CombinedOptions {
     pub precision_weighting: bool,
     /// The smallest per-method scatter (mrad) the precision weighting assumes. Default 0.02.
     pub precision_floor_mrad: f64,
+    /// After the eq. 5 vote, also find the vanishing point of each method's rows alone, and
+    /// take whichever of the three candidates both methods' rows agree with best (see
+    /// [`super::combine::consensus_score`]): another candidate replaces the vote's only when
+    /// it scores higher and passes through at least two Hough rows and three rows in all
+    /// (edge rows count only where they agree with the Hough rows' structure). The final
+    /// inlier rows are then those of either method consistent with the chosen candidate.
+    /// The vote is dominated by whichever method's support is larger (Hough accumulator
+    /// weight outnumbers edge points), so on a noisy image where the Hough rows are few and
+    /// bent, many edge boundaries agreeing with some Hough rows would otherwise be outvoted.
+    /// Default true.
+    pub consensus: bool,
+    /// In the final fit of the combined method, replace the edge method's two boundary
+    /// lines of a crop row by their centre line where a Hough row lies between them (see
+    /// [`super::combine::pair_edge_rows`]); the centre lines are weighted as a class of
+    /// their own, by their own measured scatter, beside the Hough and the unpaired edge rows.
+    /// The boundaries' errors largely cancel in the centre line. Default true.
+    pub pair_edge_rows: bool,
+    /// The largest angle (degrees, around the vanishing point) between a Hough row and an
+    /// edge boundary paired with it. Default 5 (the half-width of a crop row seen from the
+    /// camera is a few degrees; neighbouring rows are farther apart).
+    pub pair_max_deg: f64,
+    /// The combined method reports only the edge rows consistent with its vanishing point
+    /// (within `vanishing.inlier_deg`); the Hough rows are all reported, as by the Hough
+    /// method. The edge method's boundaries of sparse rows are mostly stray plant outlines,
+    /// which would otherwise count as wrong rows. Default true.
+    pub reject_edge_outliers: bool,
 }
 
 impl Default for CombinedOptions {
@@ -83,6 +109,10 @@ impl Default for CombinedOptions {
             edge_weight: 0.7,
             precision_weighting: true,
             precision_floor_mrad: 0.02,
+            consensus: true,
+            pair_edge_rows: true,
+            pair_max_deg: 5.0,
+            reject_edge_outliers: true,
         }
     }
 }
@@ -543,6 +573,13 @@ pub struct Detector {
     weights: Vec<f64>,
     precision_weights: Vec<f64>,
     precision_scratch: Vec<(f64, f64)>,
+    /// The consensus step's per-method weights and inlier flags, and the final inliers.
+    candidate_weights: Vec<f64>,
+    candidate_inliers: Vec<bool>,
+    final_inliers: Vec<bool>,
+    paired_rows: Vec<Row>,
+    paired_inliers: Vec<bool>,
+    pair_scratch: Vec<(f64, usize, super::combine::Kind)>,
     times: StageTimes,
     last_prepare: PrepareResult,
     last_hough: HoughResult,
@@ -555,6 +592,12 @@ impl Detector {
         if !(w > 0.0 && w < 1.0) {
             return Err(DetectError::Options(format!(
                 "combined.edge_weight = {w} must be within (0, 1)"
+            )));
+        }
+        let p = opts.combined.pair_max_deg;
+        if !(p > 0.0 && p < 45.0) {
+            return Err(DetectError::Options(format!(
+                "combined.pair_max_deg = {p} must be within (0, 45)"
             )));
         }
         let f = opts.combined.precision_floor_mrad;
@@ -579,6 +622,12 @@ impl Detector {
             weights: Vec::with_capacity(128),
             precision_weights: Vec::with_capacity(128),
             precision_scratch: Vec::with_capacity(128),
+            candidate_weights: Vec::with_capacity(128),
+            candidate_inliers: Vec::with_capacity(128),
+            final_inliers: Vec::with_capacity(128),
+            paired_rows: Vec::with_capacity(128),
+            paired_inliers: Vec::with_capacity(128),
+            pair_scratch: Vec::with_capacity(128),
             times: StageTimes::default(),
             last_prepare: PrepareResult::default(),
             last_hough: HoughResult::default(),
@@ -649,11 +698,23 @@ impl Detector {
                 self.vanish.run(Some(&self.weights), out)?;
             }
         }
+        self.final_inliers.clear();
+        self.final_inliers.extend_from_slice(self.vanish.inliers());
+        if method == Method::Combined && self.opts.combined.consensus {
+            self.consensus(out)?;
+        }
         if method != Method::Hough && self.opts.combined.precision_weighting {
             self.refit_by_precision(out);
         }
         if method == Method::Hough && self.opts.refit.precision_weights {
             self.refit_hough_by_precision(out);
+        }
+        if method == Method::Combined && self.opts.combined.reject_edge_outliers {
+            let sin_tol = self.opts.vanishing.inlier_deg.to_radians().sin();
+            let v = out.vanishing_point.map(|v| v.direction);
+            out.rows.retain(|r| {
+                r.method != Method::Edge || v.is_some_and(|v| r.normal.dot(&v).abs() < sin_tol)
+            });
         }
         let t4 = Instant::now();
         self.times = StageTimes {
@@ -672,12 +733,28 @@ impl Detector {
             return;
         };
         let floor = self.opts.combined.precision_floor_mrad * 1e-3;
-        let inliers = self.vanish.inliers();
+        let paired = self.opts.method == Method::Combined
+            && self.opts.combined.pair_edge_rows
+            && pair_edge_rows(
+                &out.rows,
+                &self.final_inliers,
+                &vp.direction,
+                self.opts.combined.pair_max_deg.to_radians(),
+                &mut self.paired_rows,
+                &mut self.paired_inliers,
+                &mut self.pair_scratch,
+            ) > 0;
+        let (rows, inliers) = if paired {
+            (&self.paired_rows[..], &self.paired_inliers[..])
+        } else {
+            (&out.rows[..], &self.final_inliers[..])
+        };
         let Some(fit) = precision_fit(
-            &out.rows,
+            rows,
             inliers,
             &vp.direction,
             floor,
+            EDGE_PAIR_FACTOR,
             &mut self.precision_weights,
             &mut self.precision_scratch,
         ) else {
@@ -728,6 +805,81 @@ impl Detector {
         });
         out.heading_rad = Some(ht.heading_rad);
         out.tilt_rad = Some(ht.tilt_rad);
+    }
+
+    /// The combined method's consensus step (see [`CombinedOptions::consensus`]): the vote's
+    /// vanishing point against those of the Hough rows alone and of the edge rows alone,
+    /// scored by how much of each method's rows agree with each. When another candidate
+    /// wins, the rows of either method within the inlier tolerance of it become the inliers
+    /// (iterated with the vote's weights, as the vanishing stage does) and `out` takes its
+    /// vanishing point; `final_inliers` holds the inliers either way.
+    fn consensus(&mut self, out: &mut Detection) -> Result<(), DetectError> {
+        let Some(vote) = out.vanishing_point else {
+            return Ok(());
+        };
+        let sin_tol = self.opts.vanishing.inlier_deg.to_radians().sin();
+        let mut best = consensus_score(&out.rows, &vote.direction, sin_tol).score();
+        let mut chosen: Option<Vector3<f64>> = None;
+        for only in [Method::Hough, Method::Edge] {
+            self.candidate_weights.clear();
+            for (r, &w) in out.rows.iter().zip(&self.weights) {
+                self.candidate_weights
+                    .push(if r.method == only { w } else { 0.0 });
+            }
+            let r = self.vanish.finder.find(
+                &out.rows,
+                &self.candidate_weights,
+                &mut self.candidate_inliers,
+            )?;
+            let Some(vp) = r.vanishing_point else {
+                continue;
+            };
+            let c = consensus_score(&out.rows, &vp.direction, sin_tol);
+            if c.hough_rows >= 2 && c.hough_rows + c.edge_rows >= 3 && c.score() > best {
+                best = c.score();
+                chosen = Some(vp.direction);
+            }
+        }
+        let Some(mut v) = chosen else {
+            return Ok(());
+        };
+        let mut residual = 0.0;
+        let mut count = 0;
+        for _ in 0..self.opts.vanishing.refine_iterations.max(1) {
+            let mut sc = crate::sphere::Scatter::new();
+            for (i, r) in out.rows.iter().enumerate() {
+                let ok = r.normal.dot(&v).abs() < sin_tol && self.weights[i] > 0.0;
+                self.final_inliers[i] = ok;
+                if ok {
+                    sc.add(&r.normal, self.weights[i]);
+                }
+            }
+            count = sc.count();
+            let Some(fit) = sc.fit() else { break };
+            let n = if fit.normal.dot(&v) < 0.0 {
+                -fit.normal
+            } else {
+                fit.normal
+            };
+            let moved = crate::sphere::axis_angle(&n, &v);
+            v = n;
+            residual = fit.mean_sq_residual.max(0.0).sqrt().asin();
+            if moved < 1e-12 {
+                break;
+            }
+        }
+        for (i, r) in out.rows.iter().enumerate() {
+            self.final_inliers[i] = r.normal.dot(&v).abs() < sin_tol && self.weights[i] > 0.0;
+        }
+        let ht = heading_tilt(&v, &self.prep.calibration().mounting);
+        out.vanishing_point = Some(super::VanishingPoint {
+            direction: v,
+            inliers: count,
+            residual_rad: residual,
+        });
+        out.heading_rad = Some(ht.heading_rad);
+        out.tilt_rad = Some(ht.tilt_rad);
+        Ok(())
     }
 
     /// Runs the edge method on the preparer's smoothed vegetation image and mask.

@@ -7,9 +7,18 @@
 //!   0.03 m, so that the rows are almost solid lines; no position noise, no weeds; the camera
 //!   uniformly anywhere across one row spacing (lateral 0..0.5 m) and along one plant distance.
 //! - [`Protocol::Table2`] (methods compared under heavy noise, Table II): yaw ±30°, pitch
-//!   ±10°, roll ±3°; background noise density uniform in 0.1..0.5; plant distance uniform in
-//!   0.03..0.30 m; plant position error along the row uniform in 0..0.03 m (sd) and across it
-//!   0..0.02 m (sd); 0..300 weeds within ±5 m of the camera; lateral 0..0.5 m.
+//!   ±10°, roll ±3°; background noise density uniform in 0.1..0.6; plant distance uniform in
+//!   0.03..0.25 m; plant position error along the row uniform in 0..0.05 m (sd) and across
+//!   it 0..0.05 m (sd; the paper's "row distance" error, which bends the rows); 0..800 weeds
+//!   within ±5 m of the camera; lateral 0..0.5 m. The paper's noise "is high which gives a
+//!   lot of failures": these ranges make the better single method (Hough) fail on about a
+//!   quarter of the fisheye and a few percent of the catadioptric images (seed 1, full
+//!   resolution), where the earlier, milder ranges (noise 0.1..0.5, plant distance
+//!   0.03..0.30 m, errors 0.03/0.02 m, 0..300 weeds) let it fail on none. Plant distances
+//!   beyond about 0.25 m are left out on purpose: there, under this noise, the edge method
+//!   finds almost no correct row (measured on seed 1: 1 correct of 137 edge rows over the 43
+//!   images with a plant distance over 0.2 m, against 1139 of 2380 below), so the table
+//!   would only measure the Hough method twice.
 //!
 //! The lens is the caller's choice (the paper alternates fisheye and catadioptric).
 //! Everything else keeps the [`SynthOptions`] defaults (height 1 m, rows 0.5 m apart).
@@ -23,7 +32,7 @@ use super::rng::Rng;
 pub enum Protocol {
     /// Table I: random yaw and pitch, background noise 0.1, nearly solid rows.
     Table1,
-    /// Table II: random noise levels, plant distances, position errors and weeds.
+    /// Table II: random heavy noise levels, plant distances, position errors and weeds.
     Table2,
 }
 
@@ -46,7 +55,7 @@ pub fn random_scene(seed: u64, protocol: Protocol) -> SynthOptions {
             }
         }
         Protocol::Table2 => {
-            let plant_distance_m = rng.range(0.03, 0.30);
+            let plant_distance_m = rng.range(0.03, 0.25);
             SynthOptions {
                 yaw_deg: rng.range(-30.0, 30.0),
                 pitch_deg: rng.range(-10.0, 10.0),
@@ -54,10 +63,10 @@ pub fn random_scene(seed: u64, protocol: Protocol) -> SynthOptions {
                 lateral_m: rng.range(0.0, spacing),
                 along_m: rng.range(0.0, plant_distance_m),
                 plant_distance_m,
-                noise: rng.range(0.1, 0.5),
-                along_sd_m: rng.range(0.0, 0.03),
-                across_sd_m: rng.range(0.0, 0.02),
-                weeds: rng.below(301) as usize,
+                noise: rng.range(0.1, 0.6),
+                along_sd_m: rng.range(0.0, 0.05),
+                across_sd_m: rng.range(0.0, 0.05),
+                weeds: rng.below(801) as usize,
                 weed_area_half_m: 5.0,
                 ..base
             }
@@ -84,9 +93,10 @@ mod tests {
                         assert_eq!(o.roll_deg, 0.0);
                     }
                     Protocol::Table2 => {
-                        assert!((0.1..=0.5).contains(&o.noise));
-                        assert!((0.03..=0.3).contains(&o.plant_distance_m));
-                        assert!(o.weeds <= 300);
+                        assert!((0.1..=0.6).contains(&o.noise));
+                        assert!((0.03..=0.25).contains(&o.plant_distance_m));
+                        assert!(o.weeds <= 800);
+                        assert!(o.across_sd_m <= 0.05 && o.along_sd_m <= 0.05);
                     }
                 }
             }
