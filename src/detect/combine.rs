@@ -135,12 +135,20 @@ fn weighted_median_abs(
 /// ones); `scratch` is a work buffer (both are reused, so that a warmed-up caller allocates
 /// nothing). Returns `None` (and leaves `weights` empty) with fewer than three inlier rows or
 /// when the fit degenerates: then the vote's own fit stands.
+///
+/// `hough_var` holds, for the Hough rows in their order, the variance of each normal along
+/// the vanishing point that the refit estimated from its own pixels (may be empty). When
+/// every Hough inlier has one, the Hough class's weight is shared among its rows by the
+/// inverse of that variance instead of by support, as the Hough method's own final fit does;
+/// the class's total stays set by its measured scatter.
+#[allow(clippy::too_many_arguments)]
 pub fn precision_fit(
     rows: &[Row],
     inliers: &[bool],
     v0: &Vector3<f64>,
     floor_rad: f64,
     edge_factor: f64,
+    hough_var: &[f64],
     weights: &mut Vec<f64>,
     scratch: &mut Vec<(f64, f64)>,
 ) -> Option<PrecisionFit> {
@@ -187,12 +195,41 @@ pub fn precision_fit(
             stats[k].sigma = (1.4826 * m * dof_scale).max(floor_rad);
         }
     }
+    // The Hough rows' inverse variances (by Hough ordinal) and their mean over the inliers,
+    // when every Hough inlier has one.
+    let mut inv_sum = 0.0;
+    let mut inv_ok = stats[0].count > 0;
+    let mut j = 0;
+    for (r, &ok) in rows.iter().zip(inliers) {
+        if r.method != Method::Hough {
+            continue;
+        }
+        if ok {
+            match hough_var.get(j) {
+                Some(&v) if v.is_finite() && v > 0.0 => inv_sum += 1.0 / v,
+                _ => inv_ok = false,
+            }
+        }
+        j += 1;
+    }
+    let inv_mean = inv_sum / stats[0].count.max(1) as f64;
+    let hough_ordinal = |i: usize| {
+        rows[..i]
+            .iter()
+            .filter(|r| r.method == Method::Hough)
+            .count()
+    };
     let base = |i: usize| -> f64 {
         match slot(rows[i].method) {
             Some(k) if inliers[i] => {
                 let s = &stats[k];
                 let f = if k == 1 { edge_factor } else { 1.0 };
-                f * rows[i].support as f64 / (s.support / s.count as f64) / (s.sigma * s.sigma)
+                let share = if k == 0 && inv_ok {
+                    1.0 / hough_var[hough_ordinal(i)] / inv_mean
+                } else {
+                    rows[i].support as f64 / (s.support / s.count as f64)
+                };
+                f * share / (s.sigma * s.sigma)
             }
             _ => 0.0,
         }
@@ -438,6 +475,45 @@ mod tests {
     }
 
     #[test]
+    fn hough_rows_share_their_weight_by_their_refit_variance() {
+        let vp = Vector3::new(0.1, 0.9, -0.2).normalize();
+        // Four Hough rows; the last one is off by 1 mrad and its refit says it is imprecise.
+        let all = rows(
+            &vp,
+            Method::Hough,
+            &[
+                (0.3, 0.0, 1000),
+                (0.9, 0.0, 1000),
+                (1.6, 0.0, 1000),
+                (2.4, 1e-3, 1000),
+            ],
+        );
+        let inl = vec![true; all.len()];
+        let fit = |var: &[f64]| {
+            let p = precision_fit(
+                &all,
+                &inl,
+                &vp,
+                1e-6,
+                EDGE_PAIR_FACTOR,
+                var,
+                &mut Vec::new(),
+                &mut Vec::new(),
+            )
+            .unwrap();
+            axis_angle(&p.direction, &vp)
+        };
+        let by_support = fit(&[]);
+        let by_variance = fit(&[1e-10, 1e-10, 1e-10, 1e-6]);
+        assert!(
+            by_variance < 0.1 * by_support,
+            "by variance {by_variance}, by support {by_support}"
+        );
+        // One Hough inlier without an estimate: support weighting, as without variances.
+        assert_eq!(fit(&[1e-10, 1e-10, 1e-10, f64::NAN]), by_support);
+    }
+
+    #[test]
     fn precise_method_dominates_noisy_one() {
         let vp = Vector3::new(0.1, 0.9, -0.2).normalize();
         // Hough: four rows within ±0.05 mrad; edge: ten rows scattered ±1 mrad, and
@@ -473,6 +549,7 @@ mod tests {
             &vp,
             1e-5,
             EDGE_PAIR_FACTOR,
+            &[],
             &mut w,
             &mut Vec::new(),
         )
@@ -505,6 +582,7 @@ mod tests {
             &vp,
             1e-5,
             EDGE_PAIR_FACTOR,
+            &[],
             &mut w,
             &mut Vec::new(),
         )
@@ -521,6 +599,7 @@ mod tests {
             &vp,
             1e-5,
             EDGE_PAIR_FACTOR,
+            &[],
             &mut w,
             &mut Vec::new()
         )
@@ -533,6 +612,7 @@ mod tests {
             &vp,
             1e-5,
             EDGE_PAIR_FACTOR,
+            &[],
             &mut w,
             &mut Vec::new()
         )
@@ -570,6 +650,7 @@ mod tests {
             &vp,
             1e-5,
             EDGE_PAIR_FACTOR,
+            &[],
             &mut w,
             &mut Vec::new(),
         )

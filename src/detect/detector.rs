@@ -755,6 +755,11 @@ impl Detector {
             &vp.direction,
             floor,
             EDGE_PAIR_FACTOR,
+            if self.opts.refit.precision_weights {
+                self.prep.row_variances()
+            } else {
+                &[]
+            },
             &mut self.precision_weights,
             &mut self.precision_scratch,
         ) else {
