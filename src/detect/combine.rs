@@ -456,6 +456,27 @@ pub fn consensus_score(rows: &[Row], v: &Vector3<f64>, sin_tol: f64) -> Consensu
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// [`precision_fit`] with the edge factor of the detector and a fresh scratch buffer.
+    fn pfit(
+        rows: &[Row],
+        inliers: &[bool],
+        v0: &Vector3<f64>,
+        floor_rad: f64,
+        hough_var: &[f64],
+        weights: &mut Vec<f64>,
+    ) -> Option<PrecisionFit> {
+        precision_fit(
+            rows,
+            inliers,
+            v0,
+            floor_rad,
+            EDGE_PAIR_FACTOR,
+            hough_var,
+            weights,
+            &mut Vec::new(),
+        )
+    }
     use crate::sphere::{any_perpendicular, axis_angle};
 
     /// Rows through `vp` at the given angles around it, each tilted off by `off` radians.
@@ -490,17 +511,7 @@ mod tests {
         );
         let inl = vec![true; all.len()];
         let fit = |var: &[f64]| {
-            let p = precision_fit(
-                &all,
-                &inl,
-                &vp,
-                1e-6,
-                EDGE_PAIR_FACTOR,
-                var,
-                &mut Vec::new(),
-                &mut Vec::new(),
-            )
-            .unwrap();
+            let p = pfit(&all, &inl, &vp, 1e-6, var, &mut Vec::new()).unwrap();
             axis_angle(&p.direction, &vp)
         };
         let by_support = fit(&[]);
@@ -543,17 +554,7 @@ mod tests {
         }
         let e_plain = axis_angle(&plain.fit().unwrap().normal, &vp);
         let mut w = Vec::new();
-        let p = precision_fit(
-            &all,
-            &inl,
-            &vp,
-            1e-5,
-            EDGE_PAIR_FACTOR,
-            &[],
-            &mut w,
-            &mut Vec::new(),
-        )
-        .unwrap();
+        let p = pfit(&all, &inl, &vp, 1e-5, &[], &mut w).unwrap();
         let e = axis_angle(&p.direction, &vp);
         assert!(e < 6e-5, "precision fit error {e}");
         assert!(e_plain > 1.5e-4, "plain fit error {e_plain}");
@@ -576,47 +577,17 @@ mod tests {
         let mut inl = vec![true; all.len()];
         inl[5] = false;
         let mut w = Vec::new();
-        let p = precision_fit(
-            &all,
-            &inl,
-            &vp,
-            1e-5,
-            EDGE_PAIR_FACTOR,
-            &[],
-            &mut w,
-            &mut Vec::new(),
-        )
-        .unwrap();
+        let p = pfit(&all, &inl, &vp, 1e-5, &[], &mut w).unwrap();
         assert_eq!(w[5], 0.0);
         assert!(axis_angle(&p.direction, &vp) < 2e-4, "{p:?}");
         // Two Hough rows only: their σ comes from the residual about the edge fit.
         assert!(p.sigma_hough < p.sigma_edge, "{p:?}");
         // One method alone: no refit.
         let hough_only = &all[..2];
-        assert!(precision_fit(
-            hough_only,
-            &inl[..2],
-            &vp,
-            1e-5,
-            EDGE_PAIR_FACTOR,
-            &[],
-            &mut w,
-            &mut Vec::new()
-        )
-        .is_none());
+        assert!(pfit(hough_only, &inl[..2], &vp, 1e-5, &[], &mut w).is_none());
         assert!(w.is_empty());
         // Mismatched lengths: no refit.
-        assert!(precision_fit(
-            &all,
-            &inl[..3],
-            &vp,
-            1e-5,
-            EDGE_PAIR_FACTOR,
-            &[],
-            &mut w,
-            &mut Vec::new()
-        )
-        .is_none());
+        assert!(pfit(&all, &inl[..3], &vp, 1e-5, &[], &mut w).is_none());
     }
 
     #[test]
@@ -644,17 +615,7 @@ mod tests {
         }
         let e_plain = axis_angle(&plain.fit().unwrap().normal, &vp);
         let mut w = Vec::new();
-        let p = precision_fit(
-            &all,
-            &inl,
-            &vp,
-            1e-5,
-            EDGE_PAIR_FACTOR,
-            &[],
-            &mut w,
-            &mut Vec::new(),
-        )
-        .unwrap();
+        let p = pfit(&all, &inl, &vp, 1e-5, &[], &mut w).unwrap();
         let e = axis_angle(&p.direction, &vp);
         assert!(e_plain > 5e-4, "plain {e_plain}");
         assert!(e < 1.5e-4, "robust {e} (plain {e_plain})");
