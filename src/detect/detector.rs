@@ -726,6 +726,25 @@ impl Detector {
         Ok(())
     }
 
+    /// Replaces `out`'s vanishing point by a refitted one and derives heading and tilt
+    /// from it (the final fits of the combined and Hough methods and the consensus step).
+    fn set_vanishing_point(
+        &self,
+        out: &mut Detection,
+        direction: Vector3<f64>,
+        inliers: usize,
+        residual_rad: f64,
+    ) {
+        let ht = heading_tilt(&direction, &self.prep.calibration().mounting);
+        out.vanishing_point = Some(super::VanishingPoint {
+            direction,
+            inliers,
+            residual_rad,
+        });
+        out.heading_rad = Some(ht.heading_rad);
+        out.tilt_rad = Some(ht.tilt_rad);
+    }
+
     /// The combined method's final fit: the vote's vanishing point refitted over its inlier
     /// rows with each method weighted by its measured precision ([`precision_fit`]).
     fn refit_by_precision(&mut self, out: &mut Detection) {
@@ -765,14 +784,7 @@ impl Detector {
         ) else {
             return;
         };
-        let ht = heading_tilt(&fit.direction, &self.prep.calibration().mounting);
-        out.vanishing_point = Some(super::VanishingPoint {
-            direction: fit.direction,
-            inliers: vp.inliers,
-            residual_rad: fit.residual_rad,
-        });
-        out.heading_rad = Some(ht.heading_rad);
-        out.tilt_rad = Some(ht.tilt_rad);
+        self.set_vanishing_point(out, fit.direction, vp.inliers, fit.residual_rad);
     }
 
     /// The Hough method's final fit: the vanishing point refitted over its inlier rows, each
@@ -802,14 +814,7 @@ impl Detector {
         else {
             return;
         };
-        let ht = heading_tilt(&direction, &self.prep.calibration().mounting);
-        out.vanishing_point = Some(super::VanishingPoint {
-            direction,
-            inliers: vp.inliers,
-            residual_rad,
-        });
-        out.heading_rad = Some(ht.heading_rad);
-        out.tilt_rad = Some(ht.tilt_rad);
+        self.set_vanishing_point(out, direction, vp.inliers, residual_rad);
     }
 
     /// The combined method's consensus step (see [`CombinedOptions::consensus`]): the vote's
@@ -876,14 +881,7 @@ impl Detector {
         for (i, r) in out.rows.iter().enumerate() {
             self.final_inliers[i] = r.normal.dot(&v).abs() < sin_tol && self.weights[i] > 0.0;
         }
-        let ht = heading_tilt(&v, &self.prep.calibration().mounting);
-        out.vanishing_point = Some(super::VanishingPoint {
-            direction: v,
-            inliers: count,
-            residual_rad: residual,
-        });
-        out.heading_rad = Some(ht.heading_rad);
-        out.tilt_rad = Some(ht.tilt_rad);
+        self.set_vanishing_point(out, v, count, residual);
         Ok(())
     }
 
