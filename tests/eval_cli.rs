@@ -81,3 +81,110 @@ fn eval_rejects_unknown_methods_and_bad_lenses() {
     assert!(!run.status.success());
     assert!(String::from_utf8_lossy(&run.stderr).contains("/nonexistent/lens.txt"));
 }
+
+/// The seed in outcomes.jsonl renders the Table II image again with `omnirow synth`, and
+/// `omnirow detect` on it gives the vanishing point the evaluation scored, as the report says.
+#[test]
+fn table2_outcomes_reproduce_with_synth_and_detect() {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("eval_cli_reproduce");
+    let _ = std::fs::remove_dir_all(&dir);
+    let omnirow = |args: &[&str]| {
+        let run = Command::new(env!("CARGO_BIN_EXE_omnirow"))
+            .args(args)
+            .output()
+            .unwrap();
+        assert!(
+            run.status.success(),
+            "omnirow {args:?}: {}",
+            String::from_utf8_lossy(&run.stderr)
+        );
+        String::from_utf8(run.stdout).unwrap()
+    };
+    let out = dir.join("eval");
+    omnirow(&[
+        "eval",
+        "--quick",
+        "--images",
+        "0",
+        "--distance-images",
+        "0",
+        "--table2-images",
+        "1",
+        "--methods",
+        "hough,combined",
+        "--seed",
+        "11",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let md = std::fs::read_to_string(out.join("README.md")).unwrap();
+    // The image-by-image comparison has one "passes / fails" cell per lens.
+    assert!(md.contains("| against | fisheye185 | pal |"), "{md}");
+    let against = md
+        .lines()
+        .find(|l| l.starts_with("| hough |") && l.contains(" / "))
+        .unwrap_or_else(|| panic!("no comparison row in\n{md}"));
+    assert_eq!(against.matches(" / ").count(), 2, "{against}");
+    assert!(!md.contains("both fail"), "edge was not run:\n{md}");
+    let lines: Vec<serde_json::Value> = std::fs::read_to_string(out.join("outcomes.jsonl"))
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(lines.len(), 4);
+    for o in lines.iter().filter(|o| o["method"] == "hough") {
+        let lens = o["lens"].as_str().unwrap();
+        let seed = o["seed"].as_u64().unwrap().to_string();
+        assert!(
+            o["noise"].as_f64().unwrap() > 0.0 && o["weeds"].is_u64(),
+            "{o}"
+        );
+        let png = dir.join(format!("{lens}.png"));
+        let truth = dir.join(format!("{lens}.json"));
+        omnirow(&[
+            "synth",
+            "--lens",
+            lens,
+            "--random",
+            "table2",
+            "--seed",
+            &seed,
+            "--scale",
+            "2",
+            "--out",
+            png.to_str().unwrap(),
+            "--truth",
+            truth.to_str().unwrap(),
+        ]);
+        let calib = format!(
+            "{}/config/calib/{lens}_gc2450c.toml",
+            env!("CARGO_MANIFEST_DIR")
+        );
+        let det: serde_json::Value = serde_json::from_str(&omnirow(&[
+            "detect",
+            "--calib",
+            &calib,
+            "--method",
+            "hough",
+            png.to_str().unwrap(),
+        ]))
+        .unwrap();
+        let truth: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&truth).unwrap()).unwrap();
+        let v = |x: &serde_json::Value| -> Vec<f64> {
+            x.as_array()
+                .unwrap()
+                .iter()
+                .map(|c| c.as_f64().unwrap())
+                .collect()
+        };
+        let (a, b) = (v(&det["vanishing_point"]), v(&truth["vp_along"]));
+        let dot: f64 = a.iter().zip(&b).map(|(x, y)| x * y).sum();
+        let err = dot.abs().min(1.0).acos();
+        let scored = o["vp_error_rad"].as_f64().unwrap();
+        assert!(
+            (err - scored).abs() < 1e-6,
+            "{lens} seed {seed}: detect gives {err}, eval scored {scored}"
+        );
+    }
+}

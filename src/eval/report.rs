@@ -132,6 +132,7 @@ pub fn markdown(r: &EvalResults, command: &str) -> String {
             .unwrap_or_default();
         let _ = writeln!(s, " {}/{}{} |", sum.0, sum.1, paper);
     }
+    table2_bounds(r, &mut s);
     let _ = writeln!(
         s,
         "\n## Speed\n\nDetector time per image (not counting rendering), over every image of the run.\n\n| method | median (ms) | p99 (ms) |\n|---|---|---|"
@@ -141,6 +142,61 @@ pub fn markdown(r: &EvalResults, command: &str) -> String {
         let _ = writeln!(s, "| {} | {p50:.1} | {p99:.1} |", m.name());
     }
     s
+}
+
+/// Table II's last row and notes: the images both single methods fail (what no choice
+/// between their answers can pass), where the combined method differs from each, and how
+/// to render any image again.
+fn table2_bounds(r: &EvalResults, s: &mut String) {
+    let n = r.lens_names.len();
+    let floor: Option<Vec<usize>> = (0..n)
+        .map(|l| r.all_fail(l, &[Method::Edge, Method::Hough]))
+        .collect();
+    if let Some(floor) = floor {
+        let _ = write!(s, "| edge and hough both fail |");
+        for f in &floor {
+            let _ = write!(s, " {f} |");
+        }
+        let _ = writeln!(s, " {} |", floor.iter().sum::<usize>());
+        let _ = writeln!(
+            s,
+            "\nThe last row is a floor for any combination that picks between the two methods' answers image by image: on those images neither answer passes, so only evidence that neither method finds alone can pass them."
+        );
+    }
+    let singles: Vec<Method> = [Method::Hough, Method::Edge]
+        .into_iter()
+        .filter(|m| r.methods.contains(m))
+        .collect();
+    if r.methods.contains(&Method::Combined) && !singles.is_empty() {
+        let _ = write!(
+            s,
+            "\nImage by image, combined against each method: images combined passes and the method fails / images combined fails and the method passes.\n\n| against |"
+        );
+        for name in &r.lens_names {
+            let _ = write!(s, " {name} |");
+        }
+        let _ = write!(s, "\n|---|");
+        for _ in 0..n {
+            let _ = write!(s, "---|");
+        }
+        let _ = writeln!(s);
+        for single in singles {
+            let _ = write!(s, "| {} |", single.name());
+            for l in 0..n {
+                let _ = write!(
+                    s,
+                    " {} / {} |",
+                    r.passes_where_fails(l, Method::Combined, single),
+                    r.passes_where_fails(l, single, Method::Combined)
+                );
+            }
+            let _ = writeln!(s);
+        }
+    }
+    let _ = writeln!(
+        s,
+        "\nEvery image is in outcomes.jsonl with its seed, noise and weeds; `omnirow synth --lens LENS --random table2 --seed SEED --out image.png --truth truth.json` renders a Table II image again (`--calib FILE` for a calibration file, `--scale F` if the run used one; `--random table1` for Table I)."
+    );
 }
 
 /// The detection-rate chart for one lens.
@@ -192,7 +248,10 @@ pub fn write(r: &EvalResults, dir: &Path, command: &str) -> Result<Vec<PathBuf>,
             "experiment": format!("{:?}", o.experiment).to_lowercase(),
             "lens": r.lens_names[o.lens],
             "method": o.method.name(),
+            "seed": o.seed,
             "plant_distance_m": o.plant_distance_m,
+            "noise": o.noise,
+            "weeds": o.weeds,
             "vp_error_rad": o.vp_error_rad,
             "rows_found": o.rows_found,
             "rows_correct": o.rows_correct,

@@ -118,7 +118,15 @@ pub struct Outcome {
     pub experiment: Experiment,
     pub lens: usize,
     pub method: Method,
+    /// The scene's seed: with the experiment's protocol it renders the image again
+    /// (`omnirow synth --random table1|table2 --seed S`), and it pairs the methods' outcomes
+    /// on the same image.
+    pub seed: u64,
     pub plant_distance_m: f64,
+    /// Background salt-and-pepper density of the scene.
+    pub noise: f64,
+    /// Weeds in the scene.
+    pub weeds: usize,
     /// Angle between the found and the true vanishing point (radians), if one was found.
     pub vp_error_rad: Option<f64>,
     pub rows_found: usize,
@@ -297,7 +305,10 @@ pub fn run(
                 experiment,
                 lens: l,
                 method,
+                seed,
                 plant_distance_m: scene_opts.plant_distance_m,
+                noise: scene_opts.noise,
+                weeds: scene_opts.weeds,
                 vp_error_rad,
                 rows_found,
                 rows_correct,
@@ -389,6 +400,36 @@ impl EvalResults {
         }
     }
 
+    /// Table II images of a lens on which every one of `methods` fails: no per-image choice
+    /// between their answers passes these, so they bound what combining those answers can
+    /// gain without evidence neither method finds. `None` when a method was not run.
+    pub fn all_fail(&self, lens: usize, methods: &[Method]) -> Option<usize> {
+        if methods.iter().any(|m| !self.methods.contains(m)) {
+            return None;
+        }
+        let mut failed: std::collections::HashMap<u64, usize> = std::collections::HashMap::new();
+        for o in self.outcomes.iter().filter(|o| {
+            o.experiment == Experiment::Table2 && o.lens == lens && methods.contains(&o.method)
+        }) {
+            if !self.passes(o) {
+                *failed.entry(o.seed).or_default() += 1;
+            }
+        }
+        Some(failed.values().filter(|&&n| n == methods.len()).count())
+    }
+
+    /// Table II images of a lens that `a` passes and `b` fails.
+    pub fn passes_where_fails(&self, lens: usize, a: Method, b: Method) -> usize {
+        let failed_b: std::collections::HashSet<u64> = self
+            .select(Experiment::Table2, b)
+            .filter(|o| o.lens == lens && !self.passes(o))
+            .map(|o| o.seed)
+            .collect();
+        self.select(Experiment::Table2, a)
+            .filter(|o| o.lens == lens && self.passes(o) && failed_b.contains(&o.seed))
+            .count()
+    }
+
     /// Median and 99th percentile of the detector's time per image (ms), over every image.
     pub fn speed(&self, method: Method) -> (f64, f64) {
         let t: Vec<f64> = self
@@ -454,5 +495,66 @@ mod tests {
         assert_eq!((found, correct), (4, 2));
         let (err, found, correct) = score(&Detection::default(), &truth(), &opts);
         assert_eq!((err, found, correct), (None, 0, 0));
+    }
+
+    fn outcome(lens: usize, method: Method, seed: u64, err: Option<f64>) -> Outcome {
+        Outcome {
+            experiment: Experiment::Table2,
+            lens,
+            method,
+            seed,
+            plant_distance_m: 0.1,
+            noise: 0.2,
+            weeds: 0,
+            vp_error_rad: err,
+            rows_found: 0,
+            rows_correct: 0,
+            detect_ms: 1.0,
+        }
+    }
+
+    #[test]
+    fn table2_pairs_methods_by_image() {
+        let (pass, fail) = (Some(0.001), Some(0.1));
+        let (e, h, c) = (Method::Edge, Method::Hough, Method::Combined);
+        let outcomes = vec![
+            // Lens 0: image 1 both fail, combined passes; image 2 only hough fails;
+            // image 3 all pass; image 4 both fail (edge finds no point), combined too.
+            outcome(0, e, 1, fail),
+            outcome(0, h, 1, fail),
+            outcome(0, c, 1, pass),
+            outcome(0, e, 2, pass),
+            outcome(0, h, 2, fail),
+            outcome(0, c, 2, fail),
+            outcome(0, e, 3, pass),
+            outcome(0, h, 3, pass),
+            outcome(0, c, 3, pass),
+            outcome(0, e, 4, None),
+            outcome(0, h, 4, fail),
+            outcome(0, c, 4, fail),
+            // Lens 1 (same seed as lens 0's image 1, other outcomes): hough fails alone.
+            outcome(1, e, 1, pass),
+            outcome(1, h, 1, fail),
+            outcome(1, c, 1, pass),
+        ];
+        let r = EvalResults {
+            outcomes,
+            lens_names: vec!["a".into(), "b".into()],
+            methods: vec![e, h, c],
+            plant_distances: Vec::new(),
+            pass_deg: 1.0,
+        };
+        assert_eq!(r.all_fail(0, &[e, h]), Some(2));
+        assert_eq!(r.all_fail(1, &[e, h]), Some(0));
+        assert_eq!(r.all_fail(0, &[e, h, c]), Some(1));
+        assert_eq!(r.passes_where_fails(0, c, h), 1);
+        assert_eq!(r.passes_where_fails(0, h, c), 0);
+        assert_eq!(r.passes_where_fails(0, e, c), 1);
+        assert_eq!(r.passes_where_fails(1, c, h), 1);
+        let only_hough = EvalResults {
+            methods: vec![h],
+            ..r
+        };
+        assert_eq!(only_hough.all_fail(0, &[e, h]), None);
     }
 }
