@@ -230,6 +230,19 @@ impl Calibration {
         })
     }
 
+    /// The same camera through an image reduced by an integer factor, cropping the pixels
+    /// past the last whole block (see [`OcamModel::reduced_cropped`]).
+    pub fn reduced_cropped(&self, factor: u32) -> Result<Self, String> {
+        Ok(Calibration {
+            model: self.model.reduced_cropped(factor)?,
+            mask: self.mask.map(|m| FovMask {
+                inner_radius_px: m.inner_radius_px / factor as f64,
+                outer_radius_px: m.outer_radius_px / factor as f64,
+            }),
+            mounting: self.mounting,
+        })
+    }
+
     /// Distance (pixels) of pixel (row, col) from the image centre.
     #[inline]
     pub fn radius_px(&self, row: f64, col: f64) -> f64 {

@@ -345,6 +345,27 @@ impl OcamModel {
                 self.height, self.width
             ));
         }
+        self.reduced(factor, (h.round() as u32, w.round() as u32))
+    }
+
+    /// The camera seen through an image reduced by an integer `factor` whose size is rounded
+    /// down: new pixel (r, c) covers old pixels factor·r .. factor·r + factor − 1 as in
+    /// [`OcamModel::rescaled`], and the old pixels past the last whole block are cropped.
+    pub fn reduced_cropped(&self, factor: u32) -> Result<Self, String> {
+        if factor == 0 {
+            return Err("reduction factor 0 must be at least 1".into());
+        }
+        let (h, w) = (self.height / factor, self.width / factor);
+        if h == 0 || w == 0 {
+            return Err(format!(
+                "{}x{} reduced by {factor} leaves no pixel",
+                self.height, self.width
+            ));
+        }
+        self.reduced(factor as f64, (h, w))
+    }
+
+    fn reduced(&self, factor: f64, (h, w): (u32, u32)) -> Result<Self, String> {
         let off = (factor - 1.0) / 2.0;
         let ss = self
             .ss
@@ -358,7 +379,7 @@ impl OcamModel {
             invpol,
             ((self.xc - off) / factor, (self.yc - off) / factor),
             (self.c, self.d, self.e),
-            (h.round() as u32, w.round() as u32),
+            (h, w),
         )
     }
 
@@ -570,6 +591,21 @@ mod tests {
             assert!((a - b).norm() < 1e-12, "{r},{c}");
         }
         assert!(m.rescaled(3.0).is_err());
+    }
+
+    #[test]
+    fn reduce_cropped_keeps_whole_blocks() {
+        let m = sample();
+        let t = m.reduced_cropped(3).unwrap();
+        assert_eq!((t.height, t.width), (533, 533));
+        for &(r, c) in &[(0.0, 0.0), (100.0, 250.0), (532.0, 532.0), (17.0, 400.0)] {
+            let a = t.cam2world(r, c);
+            let b = m.cam2world(3.0 * r + 1.0, 3.0 * c + 1.0);
+            assert!((a - b).norm() < 1e-12, "{r},{c}");
+        }
+        assert_eq!(m.reduced_cropped(2).unwrap(), m.rescaled(2.0).unwrap());
+        assert!(m.reduced_cropped(0).is_err());
+        assert!(m.reduced_cropped(2000).is_err());
     }
 
     #[test]

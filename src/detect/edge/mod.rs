@@ -62,8 +62,9 @@ pub struct EdgeOptions {
     /// The image is reduced by this factor (mean of factor×factor blocks) before Canny, and
     /// the calibration rescaled with it (1 = full resolution). Pixel options (tolerances,
     /// lengths, sigma) are in pixels of the reduced image. When the image size is not a
-    /// multiple of the factor, full resolution is used. Default 1: the detector already works
-    /// on a 2×2-binned image for large frames (a GC2450C frame becomes 1224×1025).
+    /// multiple of the factor, the last partial block of rows and columns is left out.
+    /// Default 1: the detector already works on a 2×2-binned image for large frames (a
+    /// GC2450C frame becomes 1224×1025).
     pub downsample: u32,
 }
 
@@ -150,16 +151,7 @@ impl EdgeDetector {
         options: EdgeOptions,
     ) -> Result<Self, EdgeError> {
         options.validate()?;
-        let mut factor = options.downsample as usize;
-        if width % factor != 0 || height % factor != 0 {
-            tracing::warn!(
-                width,
-                height,
-                factor,
-                "image size is not a multiple of the edge method's downsample factor; using full resolution"
-            );
-            factor = 1;
-        }
+        let factor = options.downsample as usize;
         let (ww, wh) = (width / factor, height / factor);
         if ww < 3 || wh < 3 {
             return Err(EdgeError::Options(format!(
@@ -168,7 +160,7 @@ impl EdgeDetector {
         }
         let calibration = calibration
             .rescaled_to(height as u32, width as u32)
-            .and_then(|c| c.rescaled_to(wh as u32, ww as u32))
+            .and_then(|c| c.reduced_cropped(factor as u32))
             .map_err(EdgeError::Calibration)?;
         let pixel_angle_rad = pixel_angle(&calibration);
         let n = ww * wh;
@@ -658,10 +650,10 @@ mod tests {
         let half = EdgeDetector::new(&cal, 60, 50, halve).unwrap();
         assert_eq!(half.calibration().size(), (25, 30));
         assert_eq!(half.working_size(), (30, 25, 2));
-        // Odd sizes fall back to full resolution.
-        let odd =
-            EdgeDetector::new(&ideal_pal(101, 121), 121, 101, EdgeOptions::default()).unwrap();
-        assert_eq!(odd.working_size(), (121, 101, 1));
+        // Sizes not a multiple of the factor leave the last partial block out.
+        let odd = EdgeDetector::new(&ideal_pal(101, 121), 121, 101, halve).unwrap();
+        assert_eq!(odd.working_size(), (60, 50, 2));
+        assert_eq!(odd.calibration().size(), (50, 60));
         let e = EdgeDetector::new(
             &cal,
             120,
