@@ -188,3 +188,51 @@ fn table2_outcomes_reproduce_with_synth_and_detect() {
         );
     }
 }
+
+/// `--config` scores the detector with a configuration's `[detector]` options, and a bad
+/// configuration is an error naming the file and the key.
+#[test]
+fn eval_scores_a_configurations_detector() {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("eval_cli_config");
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let one_row = dir.join("one_row.toml");
+    std::fs::write(&one_row, "[detector.hough]\nmax_rows = 1\n").unwrap();
+    let out = dir.join("eval");
+    let run = Command::new(env!("CARGO_BIN_EXE_omnirow"))
+        .args(["eval", "--quick", "--images", "2", "--distance-images", "0"])
+        .args(["--table2-images", "0", "--methods", "hough", "--config"])
+        .arg(&one_row)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let found: Vec<u64> = std::fs::read_to_string(out.join("outcomes.jsonl"))
+        .unwrap()
+        .lines()
+        .map(|l| {
+            serde_json::from_str::<serde_json::Value>(l).unwrap()["rows_found"]
+                .as_u64()
+                .unwrap()
+        })
+        .collect();
+    assert_eq!(found, vec![1, 1], "max_rows = 1 was not applied");
+    let bad = dir.join("bad.toml");
+    std::fs::write(&bad, "[detector.hough]\nmax_rowz = 1\n").unwrap();
+    let run = Command::new(env!("CARGO_BIN_EXE_omnirow"))
+        .args(["eval", "--quick", "--config"])
+        .arg(&bad)
+        .output()
+        .unwrap();
+    assert!(!run.status.success());
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(
+        err.contains("bad.toml") && err.contains("max_rowz"),
+        "{err}"
+    );
+}

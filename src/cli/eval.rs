@@ -35,6 +35,10 @@ pub struct EvalArgs {
     /// Resolution divisor: 1 full, 2 half (default 1; 2 with --quick).
     #[arg(long)]
     pub scale: Option<f64>,
+    /// Score the detector with the `[detector]` options of this node configuration (the
+    /// method is set by --methods), to see what a tuning does on the paper's protocol.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
     /// Methods to score, comma-separated.
     #[arg(long, value_delimiter = ',', default_value = "edge,hough,combined")]
     pub methods: Vec<String>,
@@ -63,6 +67,9 @@ pub fn run(a: EvalArgs) -> anyhow::Result<ExitCode> {
         EvalOptions::full(lenses)
     };
     opts.seed = a.seed;
+    if let Some(p) = &a.config {
+        opts.detector = crate::config::Config::load(p)?.detector;
+    }
     if let Some(n) = a.images {
         opts.table1_images = n;
     }
