@@ -45,6 +45,11 @@ pub struct HoughOptions {
     /// A row whose points do not single out a great circle (ratio of the two smallest
     /// eigenvalues of their scatter matrix above this) is dropped.
     pub max_degeneracy: f64,
+    /// At most about this many points vote (an even stride through the kept points; 0: all
+    /// of them); the refinement fits every point. Voting is the transform's cost per point,
+    /// and the peaks need fewer points than the fits do. `min_support` counts in kept
+    /// points: a peak needs `min_support / stride` votes.
+    pub vote_points: usize,
 }
 
 impl Default for HoughOptions {
@@ -60,6 +65,7 @@ impl Default for HoughOptions {
             min_tolerance_deg: 0.15,
             merge_angle_deg: 1.0,
             max_degeneracy: 0.2,
+            vote_points: 5_000,
         }
     }
 }
@@ -133,8 +139,11 @@ pub struct HoughRows {
     acc: Vec<u32>,
     /// The votes as differences along each column (phi_bins + 1 per column).
     diff: Vec<u32>,
+    /// Every how many kept points one voted in the last run.
+    vote_stride: usize,
     peaks: Vec<(u32, u32)>,
-    sel: Vec<u32>,
+    /// Points near the refined peak (ray, weight), converted once.
+    sel: Vec<([f64; 3], f64)>,
     /// Refined candidates with the half-width (radians) of their final band.
     found: Vec<(Row, f64)>,
     /// Per point: claimed by an accepted row.
@@ -214,6 +223,7 @@ impl HoughRows {
             edge: vec![0; t + 1],
             acc: vec![0; t * opts.phi_bins],
             diff: vec![0; t * (opts.phi_bins + 1)],
+            vote_stride: 1,
             peaks: Vec::with_capacity(t * opts.phi_bins),
             sel: Vec::new(),
             found: Vec::with_capacity(4 * opts.max_rows),
@@ -282,7 +292,11 @@ impl HoughRows {
         let pmax = (p - 1) as f32;
         let stride = p + 1;
         self.diff.fill(0);
-        for r in rays {
+        self.vote_stride = match self.opts.vote_points {
+            0 => 1,
+            v => rays.len().div_ceil(v).max(1),
+        };
+        for r in rays.iter().step_by(self.vote_stride) {
             // φ(θ) = atan2(−p_z, p_x cos θ + p_y sin θ) taken in [0, π): the same as
             // atan2(|p_z|, ±(p_x cos θ + p_y sin θ)) with the sign of −p_z.
             let mz = -r[2];
@@ -331,8 +345,12 @@ impl HoughRows {
         let p = self.opts.phi_bins;
         let t = self.opts.theta_bins;
         let max = self.acc.iter().copied().max().unwrap_or(0);
-        let floor = (self.opts.min_support.max(1))
-            .max((self.opts.min_peak_fraction * max as f64).ceil() as u32);
+        let floor = (self
+            .opts
+            .min_support
+            .div_ceil(self.vote_stride as u32)
+            .max(1))
+        .max((self.opts.min_peak_fraction * max as f64).ceil() as u32);
         self.peaks.clear();
         for k in 0..t {
             for j in 0..p {
@@ -378,10 +396,11 @@ impl HoughRows {
         let wide = (2.0 * tol).sin();
         self.sel.clear();
         let nf = [n0.x as f32, n0.y as f32, n0.z as f32];
-        for (i, r) in rays.iter().enumerate() {
+        for (r, &w) in rays.iter().zip(weights) {
             let d = nf[0] * r[0] + nf[1] * r[1] + nf[2] * r[2];
             if d.abs() < wide as f32 {
-                self.sel.push(i as u32);
+                self.sel
+                    .push(([r[0] as f64, r[1] as f64, r[2] as f64], w as f64));
             }
         }
         let mut n = n0;
@@ -391,11 +410,10 @@ impl HoughRows {
             let s_tol = tol.sin();
             let mut sc = Scatter::new();
             support = 0;
-            for &i in &self.sel {
-                let r = &rays[i as usize];
-                let pv = Vector3::new(r[0] as f64, r[1] as f64, r[2] as f64);
+            for &(r, w) in &self.sel {
+                let pv = Vector3::from(r);
                 if n.dot(&pv).abs() < s_tol {
-                    sc.add(&pv, weights[i as usize] as f64);
+                    sc.add(&pv, w);
                     support += 1;
                 }
             }
@@ -425,7 +443,7 @@ impl HoughRows {
     }
 
     /// Finds rows among unit rays (camera frame) with per-point weights (used by the
-    /// refinement fit; votes count points). Appends the rows to `rows`, strongest first.
+    /// refinement fit; votes count the voting points, see [`HoughOptions::vote_points`]). Appends the rows to `rows`, strongest first.
     pub fn find_rows(
         &mut self,
         rays: &[[f32; 3]],
@@ -595,6 +613,57 @@ pub(crate) mod tests {
         }
         let strongest: Vec<u32> = rows.iter().take(3).map(|r| r.support).collect();
         assert!(strongest.iter().all(|&s| s >= 1400), "{strongest:?}");
+    }
+
+    #[test]
+    fn a_stride_of_points_votes_and_every_point_is_fitted() {
+        // 3 rows × 3000 rays + 2000 noise rays; 1000 vote (every 11th), all 11000 are fitted.
+        let vp = Vector3::new(-0.3, 1.0, 0.1).normalize();
+        let a = any_perpendicular(&vp);
+        let b = vp.cross(&a);
+        let normals: Vec<Vector3<f64>> = [0.4f64, 1.4, 2.5]
+            .iter()
+            .map(|&t| canonical(&(a * t.cos() + b * t.sin())))
+            .collect();
+        let mut rng = Lcg(19);
+        let mut rays = Vec::new();
+        for n in &normals {
+            circle_rays(n, 3000, 0.2, 2.6, 0.01, &mut rng, &mut rays);
+        }
+        for _ in 0..2000 {
+            let p = Vector3::new(rng.gauss(), rng.gauss(), rng.gauss()).normalize();
+            rays.push([p.x as f32, p.y as f32, p.z as f32]);
+        }
+        let weights = vec![1.0f32; rays.len()];
+        let run = |vote_points| {
+            let mut h = HoughRows::new(HoughOptions {
+                vote_points,
+                ..Default::default()
+            })
+            .unwrap();
+            let mut rows = Vec::new();
+            h.find_rows(&rays, &weights, &mut rows).unwrap();
+            let top = h.accumulator().iter().copied().max().unwrap();
+            (rows, top)
+        };
+        let (all, top_all) = run(0);
+        let (some, top_some) = run(1000);
+        // Votes count the voting points: 11000 / 11 = 1000 voted.
+        assert!(
+            top_some * 9 < top_all && top_some * 13 > top_all,
+            "{top_some} of {top_all}"
+        );
+        for n in &normals {
+            for rows in [&all, &some] {
+                let r = rows
+                    .iter()
+                    .min_by(|x, y| axis_angle(&x.normal, n).total_cmp(&axis_angle(&y.normal, n)))
+                    .unwrap();
+                assert!(axis_angle(&r.normal, n) < 1e-3, "{n:?}: {rows:?}");
+                // The fit's support counts every kept point near the row, voter or not.
+                assert!(r.support >= 2900, "{r:?}");
+            }
+        }
     }
 
     #[test]

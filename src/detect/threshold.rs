@@ -23,7 +23,7 @@ pub struct ThresholdOptions {
 impl Default for ThresholdOptions {
     fn default() -> Self {
         ThresholdOptions {
-            target_points: 5_000,
+            target_points: 15_000,
             min_level: 10,
         }
     }
