@@ -65,7 +65,7 @@ impl Default for HoughOptions {
             min_tolerance_deg: 0.15,
             merge_angle_deg: 1.0,
             max_degeneracy: 0.2,
-            vote_points: 5_000,
+            vote_points: 3_000,
         }
     }
 }
@@ -408,15 +408,27 @@ impl HoughRows {
         let mut fit = None;
         for _ in 0..self.opts.refine_iterations.max(1) {
             let s_tol = tol.sin();
+            // The next bands are no wider and the normal moves less than a band: points
+            // beyond twice this band are never needed again (the same rule as the first
+            // selection), so the later, narrow iterations visit only the points near the row.
+            let s_keep = (2.0 * tol).min(std::f64::consts::FRAC_PI_2).sin();
             let mut sc = Scatter::new();
             support = 0;
-            for &(r, w) in &self.sel {
+            let mut kept = 0;
+            for i in 0..self.sel.len() {
+                let (r, w) = self.sel[i];
                 let pv = Vector3::from(r);
-                if n.dot(&pv).abs() < s_tol {
+                let d = n.dot(&pv).abs();
+                if d < s_tol {
                     sc.add(&pv, w);
                     support += 1;
                 }
+                if d < s_keep {
+                    self.sel[kept] = (r, w);
+                    kept += 1;
+                }
             }
+            self.sel.truncate(kept);
             let f = sc.fit()?;
             let change = axis_angle(&f.normal, &n);
             n = f.normal;
