@@ -591,25 +591,44 @@ pub(crate) mod tests {
         assert_eq!(fast_atan2(0.0, 0.0), 0.0);
     }
 
-    #[test]
-    fn finds_rows_from_rays_on_known_circles() {
-        // Three rows sharing a direction (a vanishing point near the horizon), plus noise rays.
-        let vp = Vector3::new(0.2, 1.0, 0.05).normalize();
+    /// Rows through one vanishing point `vp` at angles `at` around it (`per_row` rays each, in
+    /// a ±0.01 rad band), then `noise` rays uniform on the sphere: the rows' normals and rays.
+    fn rows_through(
+        vp: Vector3<f64>,
+        at: &[f64],
+        per_row: usize,
+        noise: usize,
+        seed: u64,
+    ) -> (Vec<Vector3<f64>>, Vec<[f32; 3]>) {
+        let vp = vp.normalize();
         let a = any_perpendicular(&vp);
         let b = vp.cross(&a);
-        let normals: Vec<Vector3<f64>> = [0.3f64, 1.2, 2.2]
+        let normals: Vec<Vector3<f64>> = at
             .iter()
             .map(|&t| canonical(&(a * t.cos() + b * t.sin())))
             .collect();
-        let mut rng = Lcg(7);
+        let mut rng = Lcg(seed);
         let mut rays = Vec::new();
         for n in &normals {
-            circle_rays(n, 1500, 0.2, 2.6, 0.01, &mut rng, &mut rays);
+            circle_rays(n, per_row, 0.2, 2.6, 0.01, &mut rng, &mut rays);
         }
-        for _ in 0..1000 {
+        for _ in 0..noise {
             let p = Vector3::new(rng.gauss(), rng.gauss(), rng.gauss()).normalize();
             rays.push([p.x as f32, p.y as f32, p.z as f32]);
         }
+        (normals, rays)
+    }
+
+    #[test]
+    fn finds_rows_from_rays_on_known_circles() {
+        // Three rows sharing a direction (a vanishing point near the horizon), plus noise rays.
+        let (normals, rays) = rows_through(
+            Vector3::new(0.2, 1.0, 0.05),
+            &[0.3, 1.2, 2.2],
+            1500,
+            1000,
+            7,
+        );
         let weights = vec![1.0f32; rays.len()];
         let mut h = HoughRows::new(HoughOptions::default()).unwrap();
         let mut rows = Vec::new();
@@ -630,22 +649,13 @@ pub(crate) mod tests {
     #[test]
     fn a_stride_of_points_votes_and_every_point_is_fitted() {
         // 3 rows × 3000 rays + 2000 noise rays; 1000 vote (every 11th), all 11000 are fitted.
-        let vp = Vector3::new(-0.3, 1.0, 0.1).normalize();
-        let a = any_perpendicular(&vp);
-        let b = vp.cross(&a);
-        let normals: Vec<Vector3<f64>> = [0.4f64, 1.4, 2.5]
-            .iter()
-            .map(|&t| canonical(&(a * t.cos() + b * t.sin())))
-            .collect();
-        let mut rng = Lcg(19);
-        let mut rays = Vec::new();
-        for n in &normals {
-            circle_rays(n, 3000, 0.2, 2.6, 0.01, &mut rng, &mut rays);
-        }
-        for _ in 0..2000 {
-            let p = Vector3::new(rng.gauss(), rng.gauss(), rng.gauss()).normalize();
-            rays.push([p.x as f32, p.y as f32, p.z as f32]);
-        }
+        let (normals, rays) = rows_through(
+            Vector3::new(-0.3, 1.0, 0.1),
+            &[0.4, 1.4, 2.5],
+            3000,
+            2000,
+            19,
+        );
         let weights = vec![1.0f32; rays.len()];
         let run = |vote_points| {
             let mut h = HoughRows::new(HoughOptions {
