@@ -2,33 +2,56 @@
 //! the raw outcomes, and the numbers in them are consistent.
 
 use std::path::Path;
-use std::process::Command;
+use std::process::{Command, Output};
+
+/// Runs the binary.
+fn omnirow(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_omnirow"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+/// Runs the binary, which must succeed; its standard output.
+fn omnirow_ok(args: &[&str]) -> String {
+    let run = omnirow(args);
+    assert!(
+        run.status.success(),
+        "omnirow {args:?}: {}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    String::from_utf8(run.stdout).unwrap()
+}
+
+/// The outcomes.jsonl an eval wrote into `dir`, a value per line.
+fn outcomes(dir: &Path) -> Vec<serde_json::Value> {
+    std::fs::read_to_string(dir.join("outcomes.jsonl"))
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect()
+}
 
 #[test]
 fn eval_writes_tables_plots_and_outcomes() {
     let out = Path::new(env!("CARGO_TARGET_TMPDIR")).join("eval_cli");
     let _ = std::fs::remove_dir_all(&out);
-    let run = Command::new(env!("CARGO_BIN_EXE_omnirow"))
-        .args([
-            "eval",
-            "--quick",
-            "--images",
-            "2",
-            "--table2-images",
-            "1",
-            "--distance-images",
-            "1",
-            "--methods",
-            "hough",
-            "--seed",
-            "7",
-            "--out",
-        ])
-        .arg(&out)
-        .output()
-        .unwrap();
-    let stderr = String::from_utf8_lossy(&run.stderr);
-    assert!(run.status.success(), "{stderr}");
+    omnirow_ok(&[
+        "eval",
+        "--quick",
+        "--images",
+        "2",
+        "--table2-images",
+        "1",
+        "--distance-images",
+        "1",
+        "--methods",
+        "hough",
+        "--seed",
+        "7",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
     let md = std::fs::read_to_string(out.join("README.md")).unwrap();
     for needle in [
         "## Table I",
@@ -43,11 +66,7 @@ fn eval_writes_tables_plots_and_outcomes() {
         let png = image::open(out.join(format!("detection_rate_{lens}.png"))).unwrap();
         assert_eq!((png.width(), png.height()), (640, 420));
     }
-    let lines: Vec<serde_json::Value> = std::fs::read_to_string(out.join("outcomes.jsonl"))
-        .unwrap()
-        .lines()
-        .map(|l| serde_json::from_str(l).unwrap())
-        .collect();
+    let lines = outcomes(&out);
     // 2 Table I images + 3 distances x 2 lenses x 1 + 2 lenses x 1 Table II image, one method.
     assert_eq!(lines.len(), 2 + 6 + 2);
     for l in &lines {
@@ -68,16 +87,10 @@ fn eval_writes_tables_plots_and_outcomes() {
 
 #[test]
 fn eval_rejects_unknown_methods_and_bad_lenses() {
-    let run = Command::new(env!("CARGO_BIN_EXE_omnirow"))
-        .args(["eval", "--quick", "--methods", "magic"])
-        .output()
-        .unwrap();
+    let run = omnirow(&["eval", "--quick", "--methods", "magic"]);
     assert!(!run.status.success());
     assert!(String::from_utf8_lossy(&run.stderr).contains("unknown method 'magic'"));
-    let run = Command::new(env!("CARGO_BIN_EXE_omnirow"))
-        .args(["eval", "--quick", "--lens", "/nonexistent/lens.txt"])
-        .output()
-        .unwrap();
+    let run = omnirow(&["eval", "--quick", "--lens", "/nonexistent/lens.txt"]);
     assert!(!run.status.success());
     assert!(String::from_utf8_lossy(&run.stderr).contains("/nonexistent/lens.txt"));
 }
@@ -88,20 +101,8 @@ fn eval_rejects_unknown_methods_and_bad_lenses() {
 fn table2_outcomes_reproduce_with_synth_and_detect() {
     let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("eval_cli_reproduce");
     let _ = std::fs::remove_dir_all(&dir);
-    let omnirow = |args: &[&str]| {
-        let run = Command::new(env!("CARGO_BIN_EXE_omnirow"))
-            .args(args)
-            .output()
-            .unwrap();
-        assert!(
-            run.status.success(),
-            "omnirow {args:?}: {}",
-            String::from_utf8_lossy(&run.stderr)
-        );
-        String::from_utf8(run.stdout).unwrap()
-    };
     let out = dir.join("eval");
-    omnirow(&[
+    omnirow_ok(&[
         "eval",
         "--quick",
         "--images",
@@ -126,11 +127,7 @@ fn table2_outcomes_reproduce_with_synth_and_detect() {
         .unwrap_or_else(|| panic!("no comparison row in\n{md}"));
     assert_eq!(against.matches(" / ").count(), 2, "{against}");
     assert!(!md.contains("both fail"), "edge was not run:\n{md}");
-    let lines: Vec<serde_json::Value> = std::fs::read_to_string(out.join("outcomes.jsonl"))
-        .unwrap()
-        .lines()
-        .map(|l| serde_json::from_str(l).unwrap())
-        .collect();
+    let lines = outcomes(&out);
     assert_eq!(lines.len(), 4);
     for o in lines.iter().filter(|o| o["method"] == "hough") {
         let lens = o["lens"].as_str().unwrap();
@@ -141,7 +138,7 @@ fn table2_outcomes_reproduce_with_synth_and_detect() {
         );
         let png = dir.join(format!("{lens}.png"));
         let truth = dir.join(format!("{lens}.json"));
-        omnirow(&[
+        omnirow_ok(&[
             "synth",
             "--lens",
             lens,
@@ -160,7 +157,7 @@ fn table2_outcomes_reproduce_with_synth_and_detect() {
             "{}/config/calib/{lens}_gc2450c.toml",
             env!("CARGO_MANIFEST_DIR")
         );
-        let det: serde_json::Value = serde_json::from_str(&omnirow(&[
+        let det: serde_json::Value = serde_json::from_str(&omnirow_ok(&[
             "detect",
             "--calib",
             &calib,
@@ -199,36 +196,30 @@ fn eval_scores_a_configurations_detector() {
     let one_row = dir.join("one_row.toml");
     std::fs::write(&one_row, "[detector.hough]\nmax_rows = 1\n").unwrap();
     let out = dir.join("eval");
-    let run = Command::new(env!("CARGO_BIN_EXE_omnirow"))
-        .args(["eval", "--quick", "--images", "2", "--distance-images", "0"])
-        .args(["--table2-images", "0", "--methods", "hough", "--config"])
-        .arg(&one_row)
-        .arg("--out")
-        .arg(&out)
-        .output()
-        .unwrap();
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
-    let found: Vec<u64> = std::fs::read_to_string(out.join("outcomes.jsonl"))
-        .unwrap()
-        .lines()
-        .map(|l| {
-            serde_json::from_str::<serde_json::Value>(l).unwrap()["rows_found"]
-                .as_u64()
-                .unwrap()
-        })
+    omnirow_ok(&[
+        "eval",
+        "--quick",
+        "--images",
+        "2",
+        "--distance-images",
+        "0",
+        "--table2-images",
+        "0",
+        "--methods",
+        "hough",
+        "--config",
+        one_row.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let found: Vec<u64> = outcomes(&out)
+        .iter()
+        .map(|o| o["rows_found"].as_u64().unwrap())
         .collect();
     assert_eq!(found, vec![1, 1], "max_rows = 1 was not applied");
     let bad = dir.join("bad.toml");
     std::fs::write(&bad, "[detector.hough]\nmax_rowz = 1\n").unwrap();
-    let run = Command::new(env!("CARGO_BIN_EXE_omnirow"))
-        .args(["eval", "--quick", "--config"])
-        .arg(&bad)
-        .output()
-        .unwrap();
+    let run = omnirow(&["eval", "--quick", "--config", bad.to_str().unwrap()]);
     assert!(!run.status.success());
     let err = String::from_utf8_lossy(&run.stderr);
     assert!(

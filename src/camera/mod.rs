@@ -220,27 +220,26 @@ impl Calibration {
 
     /// The same camera with every pixel quantity divided by `factor` (2 = half resolution).
     pub fn rescaled(&self, factor: f64) -> Result<Self, String> {
-        Ok(Calibration {
-            model: self.model.rescaled(factor)?,
-            mask: self.mask.map(|m| FovMask {
-                inner_radius_px: m.inner_radius_px / factor,
-                outer_radius_px: m.outer_radius_px / factor,
-            }),
-            mounting: self.mounting,
-        })
+        Ok(self.with_model(self.model.rescaled(factor)?, factor))
     }
 
     /// The same camera through an image reduced by an integer factor, cropping the pixels
     /// past the last whole block (see [`OcamModel::reduced_cropped`]).
     pub fn reduced_cropped(&self, factor: u32) -> Result<Self, String> {
-        Ok(Calibration {
-            model: self.model.reduced_cropped(factor)?,
+        Ok(self.with_model(self.model.reduced_cropped(factor)?, factor as f64))
+    }
+
+    /// This calibration with `model`, a rescaling of its own by `factor`, and its mask's
+    /// radii scaled with it.
+    fn with_model(&self, model: OcamModel, factor: f64) -> Self {
+        Calibration {
+            model,
             mask: self.mask.map(|m| FovMask {
-                inner_radius_px: m.inner_radius_px / factor as f64,
-                outer_radius_px: m.outer_radius_px / factor as f64,
+                inner_radius_px: m.inner_radius_px / factor,
+                outer_radius_px: m.outer_radius_px / factor,
             }),
             mounting: self.mounting,
-        })
+        }
     }
 
     /// Distance (pixels) of pixel (row, col) from the image centre.
