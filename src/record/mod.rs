@@ -11,7 +11,10 @@
 //! duration, and recording stops (detection goes on) when free space would fall below the
 //! reserve. Each file carries the calibration as the attachment `calibration.toml`. [`image_msg`] holds the CDR and Foxglove image codecs.
 
+mod config;
 pub mod image_msg;
+
+pub(crate) use config::RawRecord;
 
 use crate::estimate::Estimate;
 use crate::frame::Frame;
