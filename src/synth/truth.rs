@@ -30,6 +30,9 @@ pub struct GroundTruth {
     /// Lateral offset of the camera from the nearest row, metres: world y of the camera
     /// minus world y of that row, in (−spacing/2, spacing/2].
     pub lateral_offset_m: f64,
+    /// The camera's world y (row i runs along y = i·`row_spacing_m`), metres.
+    #[serde(default)]
+    pub camera_lateral_m: f64,
     pub row_spacing_m: f64,
     pub plant_distance_m: f64,
     /// Noise settings used to render the image.
@@ -85,6 +88,7 @@ impl GroundTruth {
             tilt_rad: pose.tilt(),
             height_m: o.height_m,
             lateral_offset_m: lateral,
+            camera_lateral_m: o.lateral_m,
             row_spacing_m: s,
             plant_distance_m: o.plant_distance_m,
             noise: NoiseTruth {
