@@ -22,4 +22,5 @@ pub mod record;
 pub mod ros2;
 pub mod source;
 pub mod sphere;
+pub mod status;
 pub mod synth;

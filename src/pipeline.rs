@@ -23,10 +23,9 @@ use crate::gige::Recycler;
 use crate::publish::Publisher;
 use crate::record::{RecordState, Recorder};
 use crate::source::{Poll, Source, SourceState};
+use crate::status::{Latest, Shared, StatusSummary};
 use crossbeam_channel::{bounded, Receiver, RecvTimeoutError, Sender, TrySendError};
-use serde::Serialize;
-use std::collections::{BTreeMap, VecDeque};
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::collections::BTreeMap;
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
@@ -88,231 +87,6 @@ pub enum PipelineError {
     Thread(&'static str, std::io::Error),
 }
 
-/// The status summary: once a second in the log, to the publishers, on /metrics.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct StatusSummary {
-    pub uptime_s: f64,
-    pub frames_in: u64,
-    pub frames_out: u64,
-    /// Frames dropped by the drop-oldest policy (detector too slow).
-    pub dropped: u64,
-    /// Frames or estimates the recorder dropped (disk too slow).
-    pub record_dropped: u64,
-    pub detector_errors: u64,
-    /// Frames per second in and out over the last status interval.
-    pub fps_in: f64,
-    pub fps_out: f64,
-    /// Detector time per frame over the last 1024 frames, milliseconds.
-    pub detector_p50_ms: f64,
-    pub detector_p99_ms: f64,
-    /// End-to-end latency (receive → publish) over the last 1024 frames, milliseconds.
-    pub latency_p50_ms: f64,
-    pub latency_p99_ms: f64,
-    pub source_state: SourceState,
-    pub recording: String,
-    pub recorded_frames: u64,
-    /// Estimates published per status since the start.
-    pub status_counts: BTreeMap<String, u64>,
-}
-
-/// The latest published frame with its detection (for /overlay.png).
-#[derive(Debug, Clone)]
-pub struct Latest {
-    pub frame: Arc<Frame>,
-    pub detection: Detection,
-    pub estimate: Estimate,
-}
-
-/// State shared by the pipeline threads and read by the monitors (HTTP, systemd).
-pub struct Shared {
-    started: Instant,
-    stop: AtomicBool,
-    frames_in: AtomicU64,
-    frames_out: AtomicU64,
-    dropped: AtomicU64,
-    record_dropped: AtomicU64,
-    detector_errors: AtomicU64,
-    recorded_frames: AtomicU64,
-    source_state: Mutex<SourceState>,
-    recording: Mutex<String>,
-    samples: Mutex<Samples>,
-    latest: Mutex<Option<Latest>>,
-    /// Last loop time of each thread, ns since `started` (0 = finished).
-    heartbeats: Mutex<Vec<(&'static str, u64)>>,
-    rates: Mutex<Rates>,
-    source_error: Mutex<Option<String>>,
-}
-
-#[derive(Default)]
-struct Samples {
-    detector_ms: VecDeque<f64>,
-    latency_ms: VecDeque<f64>,
-    status_counts: BTreeMap<String, u64>,
-}
-
-struct Rates {
-    at: Instant,
-    frames_in: u64,
-    frames_out: u64,
-    fps_in: f64,
-    fps_out: f64,
-}
-
-const SAMPLE_WINDOW: usize = 1024;
-/// A thread that has not looped for this long counts as stuck.
-const STUCK_AFTER: Duration = Duration::from_secs(5);
-
-fn percentile(v: &VecDeque<f64>, p: f64) -> f64 {
-    if v.is_empty() {
-        return 0.0;
-    }
-    let mut s: Vec<f64> = v.iter().copied().collect();
-    s.sort_by(f64::total_cmp);
-    let i = ((p * (s.len() - 1) as f64).round() as usize).min(s.len() - 1);
-    s[i]
-}
-
-impl Shared {
-    fn new() -> Self {
-        let now = Instant::now();
-        Shared {
-            started: now,
-            stop: AtomicBool::new(false),
-            frames_in: AtomicU64::new(0),
-            frames_out: AtomicU64::new(0),
-            dropped: AtomicU64::new(0),
-            record_dropped: AtomicU64::new(0),
-            detector_errors: AtomicU64::new(0),
-            recorded_frames: AtomicU64::new(0),
-            source_state: Mutex::new(SourceState::Starting),
-            recording: Mutex::new("off".into()),
-            samples: Mutex::new(Samples::default()),
-            latest: Mutex::new(None),
-            heartbeats: Mutex::new(Vec::new()),
-            rates: Mutex::new(Rates {
-                at: now,
-                frames_in: 0,
-                frames_out: 0,
-                fps_in: 0.0,
-                fps_out: 0.0,
-            }),
-            source_error: Mutex::new(None),
-        }
-    }
-
-    fn register(&self, name: &'static str) -> usize {
-        let mut h = lock(&self.heartbeats);
-        h.push((name, self.elapsed_ns().max(1)));
-        h.len() - 1
-    }
-
-    fn beat(&self, id: usize) {
-        let t = self.elapsed_ns().max(1);
-        lock(&self.heartbeats)[id].1 = t;
-    }
-
-    fn retire(&self, id: usize) {
-        lock(&self.heartbeats)[id].1 = 0;
-    }
-
-    fn elapsed_ns(&self) -> u64 {
-        self.started.elapsed().as_nanos() as u64
-    }
-
-    /// Asks the source to stop; the pipeline then drains and finishes.
-    pub fn request_stop(&self) {
-        self.stop.store(true, Ordering::SeqCst);
-    }
-
-    pub fn stop_requested(&self) -> bool {
-        self.stop.load(Ordering::SeqCst)
-    }
-
-    /// True while every pipeline thread that is still running loops (none is stuck; threads
-    /// that finished do not count).
-    pub fn alive(&self) -> bool {
-        let now = self.elapsed_ns();
-        let h = lock(&self.heartbeats);
-        !h.is_empty()
-            && h.iter()
-                .all(|&(_, t)| t == 0 || now.saturating_sub(t) < STUCK_AFTER.as_nanos() as u64)
-    }
-
-    /// The names of the threads that are stuck (for the log).
-    pub fn stuck_threads(&self) -> Vec<&'static str> {
-        let now = self.elapsed_ns();
-        lock(&self.heartbeats)
-            .iter()
-            .filter(|&&(_, t)| t != 0 && now.saturating_sub(t) >= STUCK_AFTER.as_nanos() as u64)
-            .map(|&(n, _)| n)
-            .collect()
-    }
-
-    pub fn frames_in(&self) -> u64 {
-        self.frames_in.load(Ordering::Relaxed)
-    }
-
-    pub fn source_state(&self) -> SourceState {
-        *lock(&self.source_state)
-    }
-
-    /// The error the source stopped with, if it failed.
-    pub fn source_error(&self) -> Option<String> {
-        lock(&self.source_error).clone()
-    }
-
-    pub fn latest(&self) -> Option<Latest> {
-        lock(&self.latest).clone()
-    }
-
-    /// The status summary now (frame rates over the last status interval).
-    pub fn status(&self) -> StatusSummary {
-        let (fps_in, fps_out) = {
-            let r = lock(&self.rates);
-            (r.fps_in, r.fps_out)
-        };
-        let s = lock(&self.samples);
-        StatusSummary {
-            uptime_s: self.started.elapsed().as_secs_f64(),
-            frames_in: self.frames_in.load(Ordering::Relaxed),
-            frames_out: self.frames_out.load(Ordering::Relaxed),
-            dropped: self.dropped.load(Ordering::Relaxed),
-            record_dropped: self.record_dropped.load(Ordering::Relaxed),
-            detector_errors: self.detector_errors.load(Ordering::Relaxed),
-            fps_in,
-            fps_out,
-            detector_p50_ms: percentile(&s.detector_ms, 0.5),
-            detector_p99_ms: percentile(&s.detector_ms, 0.99),
-            latency_p50_ms: percentile(&s.latency_ms, 0.5),
-            latency_p99_ms: percentile(&s.latency_ms, 0.99),
-            source_state: self.source_state(),
-            recording: lock(&self.recording).clone(),
-            recorded_frames: self.recorded_frames.load(Ordering::Relaxed),
-            status_counts: s.status_counts.clone(),
-        }
-    }
-
-    fn update_rates(&self) {
-        let mut r = lock(&self.rates);
-        let dt = r.at.elapsed().as_secs_f64();
-        if dt <= 0.0 {
-            return;
-        }
-        let fin = self.frames_in.load(Ordering::Relaxed);
-        let fout = self.frames_out.load(Ordering::Relaxed);
-        r.fps_in = (fin - r.frames_in) as f64 / dt;
-        r.fps_out = (fout - r.frames_out) as f64 / dt;
-        r.frames_in = fin;
-        r.frames_out = fout;
-        r.at = Instant::now();
-    }
-}
-
-/// Locks a mutex, recovering the data if a thread panicked while holding it.
-fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
-    m.lock().unwrap_or_else(|e| e.into_inner())
-}
-
 /// Sends `item`, dropping the oldest queued items while the channel is full. Returns how
 /// many were dropped.
 pub fn send_drop_oldest<T>(tx: &Sender<T>, rx: &Receiver<T>, item: T) -> u64 {
@@ -366,12 +140,12 @@ impl Release {
 
 /// Sends `item`, waiting while the channel is full (for sources that are not real-time).
 /// Gives up and counts the item as dropped only when `stop` is set while waiting.
-fn send_waiting<T>(tx: &Sender<T>, mut item: T, stop: &AtomicBool) -> u64 {
+fn send_waiting<T>(tx: &Sender<T>, mut item: T, shared: &Shared) -> u64 {
     loop {
         match tx.send_timeout(item, Duration::from_millis(50)) {
             Ok(()) => return 0,
             Err(crossbeam_channel::SendTimeoutError::Timeout(back)) => {
-                if stop.load(Ordering::SeqCst) {
+                if shared.stop_requested() {
                     return 1;
                 }
                 item = back;
@@ -437,15 +211,15 @@ impl Pipeline {
             let sh = shared.clone();
             let rx = rec_rx.clone();
             let release = release.clone();
-            let id = sh.register("recorder");
-            *lock(&sh.recording) = record_state_text(rec.state());
+            let hb = sh.register("recorder");
+            sh.set_recording(record_state_text(rec.state()));
             threads.push((
                 "recorder",
                 spawn(
                     "recorder",
                     Box::new(move || {
                         loop {
-                            sh.beat(id);
+                            hb.beat();
                             let item = match rx.recv_timeout(Duration::from_millis(200)) {
                                 Ok(i) => i,
                                 Err(RecvTimeoutError::Timeout) => continue,
@@ -460,15 +234,14 @@ impl Pipeline {
                                 rec.fail(e.to_string());
                             }
                             release.record_item(item);
-                            sh.recorded_frames
-                                .store(rec.frames_written(), Ordering::Relaxed);
-                            *lock(&sh.recording) = record_state_text(rec.state());
+                            sh.set_recorded_frames(rec.frames_written());
+                            sh.set_recording(record_state_text(rec.state()));
                         }
                         if let Err(e) = rec.finish() {
                             tracing::error!("closing the recording: {e}");
                         }
-                        *lock(&sh.recording) = record_state_text(rec.state());
-                        sh.retire(id);
+                        sh.set_recording(record_state_text(rec.state()));
+                        hb.retire();
                     }),
                 )?,
             ));
@@ -481,7 +254,7 @@ impl Pipeline {
             let (rtx, rrx) = (rec_tx.clone(), rec_rx.clone());
             let opts = opts.clone();
             let release = release.clone();
-            let id = sh.register("source");
+            let hb = sh.register("source");
             tracing::info!("source: {}", source.describe());
             threads.push((
                 "source",
@@ -492,7 +265,7 @@ impl Pipeline {
                         let mut n = 0u64;
                         let realtime = source.realtime();
                         loop {
-                            sh.beat(id);
+                            hb.beat();
                             if sh.stop_requested()
                                 || opts.max_frames.is_some_and(|m| n >= m)
                                 || opts.max_duration.is_some_and(|d| t0.elapsed() >= d)
@@ -500,7 +273,7 @@ impl Pipeline {
                                 break;
                             }
                             let polled = source.poll(opts.poll_timeout);
-                            *lock(&sh.source_state) = source.state();
+                            sh.set_source_state(source.state());
                             match polled {
                                 Ok(Poll::Frame(mut f)) => {
                                     // A camera stamps the buffer's arrival itself.
@@ -508,7 +281,7 @@ impl Pipeline {
                                         f.receive_ns = now_ns();
                                     }
                                     n += 1;
-                                    sh.frames_in.fetch_add(1, Ordering::Relaxed);
+                                    sh.count_frame_in();
                                     let f = Arc::new(f);
                                     if recording {
                                         let item = RecordItem::Frame(f.clone());
@@ -517,17 +290,17 @@ impl Pipeline {
                                                 release.record_item(i)
                                             })
                                         } else {
-                                            send_waiting(&rtx, item, &sh.stop)
+                                            send_waiting(&rtx, item, &sh)
                                         };
-                                        sh.record_dropped.fetch_add(d, Ordering::Relaxed);
+                                        sh.count_record_dropped(d);
                                     }
                                     let d = if realtime {
                                         send_drop_oldest_with(&tx, &rx, f, |f| release.frame(f))
                                     } else {
-                                        send_waiting(&tx, f, &sh.stop)
+                                        send_waiting(&tx, f, &sh)
                                     };
                                     if d > 0 {
-                                        sh.dropped.fetch_add(d, Ordering::Relaxed);
+                                        sh.count_dropped(d);
                                         tracing::debug!(
                                             dropped = d,
                                             "frame queue full: oldest dropped"
@@ -541,17 +314,13 @@ impl Pipeline {
                                 }
                                 Err(e) => {
                                     tracing::error!("source failed: {e}");
-                                    *lock(&sh.source_error) = Some(e.to_string());
+                                    sh.set_source_error(e.to_string());
                                     break;
                                 }
                             }
                         }
-                        let mut st = lock(&sh.source_state);
-                        if *st != SourceState::Lost {
-                            *st = SourceState::Ended;
-                        }
-                        drop(st);
-                        sh.retire(id);
+                        sh.source_ended();
+                        hb.retire();
                     }),
                 )?,
             ));
@@ -566,7 +335,7 @@ impl Pipeline {
             let intake = intake.clone();
             let tx = done_tx.clone();
             let min_quality = opts.min_quality;
-            let id = sh.register(name);
+            let hb = sh.register(name);
             threads.push((
                 name,
                 spawn(
@@ -574,9 +343,9 @@ impl Pipeline {
                     Box::new(move || {
                         let mut det = Detection::default();
                         loop {
-                            sh.beat(id);
+                            hb.beat();
                             let got = {
-                                let mut g = lock(&intake);
+                                let mut g = intake.lock().unwrap_or_else(|e| e.into_inner());
                                 match g.0.recv_timeout(Duration::from_millis(100)) {
                                     Ok(f) => {
                                         let t = g.1;
@@ -591,7 +360,7 @@ impl Pipeline {
                                 Err(RecvTimeoutError::Timeout) => continue,
                                 Err(RecvTimeoutError::Disconnected) => break,
                             };
-                            sh.beat(id);
+                            hb.beat();
                             let t = Instant::now();
                             let result = match frame.view() {
                                 Ok(view) => proc.process(&view, &mut det),
@@ -601,7 +370,7 @@ impl Pipeline {
                             let estimate = match result {
                                 Ok(()) => Estimate::from_detection(&frame, &det, ms, min_quality),
                                 Err(e) => {
-                                    sh.detector_errors.fetch_add(1, Ordering::Relaxed);
+                                    sh.count_detector_error();
                                     tracing::warn!(seq = frame.seq, "detector: {e}");
                                     det = Detection::default();
                                     let mut est = Estimate::empty(&frame, Status::Error);
@@ -620,7 +389,7 @@ impl Pipeline {
                                 break;
                             }
                         }
-                        sh.retire(id);
+                        hb.retire();
                     }),
                 )?,
             ));
@@ -633,7 +402,7 @@ impl Pipeline {
             let rtx = rec_tx;
             let rrx = rec_rx;
             let release = release.clone();
-            let id = sh.register("publisher");
+            let hb = sh.register("publisher");
             let status_interval = opts.status_interval;
             let max_waiting = opts.estimate_queue + 2 * n_workers + 2;
             threads.push((
@@ -648,7 +417,7 @@ impl Pipeline {
                         let mut last_seq = 0u64;
                         let mut disconnected = false;
                         while !disconnected || !waiting.is_empty() {
-                            sh.beat(id);
+                            hb.beat();
                             match done_rx.recv_timeout(Duration::from_millis(100)) {
                                 Ok(d) => {
                                     waiting.insert(d.ticket, d);
@@ -678,28 +447,16 @@ impl Pipeline {
                                         tracing::debug!(publisher = p.name(), "publish: {e}");
                                     }
                                 }
-                                sh.frames_out.fetch_add(1, Ordering::Relaxed);
-                                {
-                                    let mut s = lock(&sh.samples);
-                                    if s.detector_ms.len() == SAMPLE_WINDOW {
-                                        s.detector_ms.pop_front();
-                                        s.latency_ms.pop_front();
-                                    }
-                                    s.detector_ms.push_back(estimate.detector_ms);
-                                    s.latency_ms.push_back(estimate.latency_ms);
-                                    *s.status_counts
-                                        .entry(estimate.status.name().to_string())
-                                        .or_default() += 1;
-                                }
+                                sh.count_published(&estimate);
                                 if recording {
                                     let d = send_drop_oldest(
                                         &rtx,
                                         &rrx,
                                         RecordItem::Estimate(Box::new(estimate.clone())),
                                     );
-                                    sh.record_dropped.fetch_add(d, Ordering::Relaxed);
+                                    sh.count_record_dropped(d);
                                 }
-                                let previous = lock(&sh.latest).replace(Latest {
+                                let previous = sh.replace_latest(Latest {
                                     frame,
                                     detection,
                                     estimate,
@@ -716,10 +473,7 @@ impl Pipeline {
                                 for p in publishers.iter_mut() {
                                     let _ = p.publish(&e, None);
                                 }
-                                *lock(&sh.samples)
-                                    .status_counts
-                                    .entry(e.status.name().to_string())
-                                    .or_default() += 1;
+                                sh.count_status(e.status);
                             }
                             if last_status.elapsed() >= status_interval {
                                 last_status = Instant::now();
@@ -745,7 +499,7 @@ impl Pipeline {
                         for p in publishers.iter_mut() {
                             p.finish();
                         }
-                        sh.retire(id);
+                        hb.retire();
                     }),
                 )?,
             ));
@@ -818,6 +572,7 @@ mod tests {
     use crate::publish::PublishError;
     use crate::source::SourceError;
     use nalgebra::Vector3;
+    use std::sync::atomic::{AtomicU64, Ordering};
 
     /// Delivers `n` tiny frames as fast as asked.
     struct Burst {

@@ -9,9 +9,11 @@
 
 mod ideal;
 mod ocam;
+mod pinhole;
 
 pub use ideal::{ideal_fisheye, ideal_pal, IdealLens};
 pub use ocam::{CalibError, OcamModel};
+pub use pinhole::{ConversionError, DistortionModel, Pinhole, PinholeToml};
 
 use nalgebra::{Rotation3, Vector3};
 use serde::{Deserialize, Serialize};
@@ -180,19 +182,14 @@ impl Calibration {
         }
     }
 
-    /// Parses omnirow's TOML calibration.
+    /// Parses omnirow's TOML calibration: the Taylor model's keys, or a `[pinhole]` table
+    /// (a perspective camera, converted to the Taylor model).
     pub fn parse_toml(text: &str, path: &Path) -> Result<Self, CalibError> {
-        let raw: CalibrationToml = toml::from_str(text).map_err(|e| {
-            let line = e
-                .span()
-                .map(|s| text[..s.start.min(text.len())].lines().count().max(1))
-                .unwrap_or(1);
-            CalibError::Parse {
-                path: path.to_path_buf(),
-                line,
-                problem: e.message().to_string(),
-            }
-        })?;
+        let raw: CalibrationToml = if pinhole::is_pinhole_toml(text) {
+            pinhole::parse_toml(text, path)?.0
+        } else {
+            toml::from_str(text).map_err(|e| toml_error(text, path, e))?
+        };
         let invalid = |problem: String| CalibError::Invalid {
             path: path.to_path_buf(),
             problem,
@@ -220,8 +217,13 @@ impl Calibration {
 
     /// The calibration as omnirow TOML.
     pub fn to_toml(&self) -> String {
+        toml::to_string(&self.raw_toml()).unwrap_or_default()
+    }
+
+    /// The calibration as the TOML file's keys.
+    fn raw_toml(&self) -> CalibrationToml {
         let m = &self.model;
-        let raw = CalibrationToml {
+        CalibrationToml {
             height: m.height,
             width: m.width,
             centre: [m.xc, m.yc],
@@ -230,8 +232,7 @@ impl Calibration {
             invpol: m.invpol.clone(),
             mask: self.mask,
             mounting: self.mounting,
-        };
-        toml::to_string(&raw).unwrap_or_default()
+        }
     }
 
     /// Image height and width of the calibration.
@@ -371,6 +372,19 @@ impl Calibration {
         let theta = ray.z.atan2(norm);
         let (lo, hi) = self.model.theta_range();
         theta >= lo && theta <= hi
+    }
+}
+
+/// A TOML parse error as a calibration error naming the file and the line.
+fn toml_error(text: &str, path: &Path, e: toml::de::Error) -> CalibError {
+    let line = e
+        .span()
+        .map(|s| text[..s.start.min(text.len())].lines().count().max(1))
+        .unwrap_or(1);
+    CalibError::Parse {
+        path: path.to_path_buf(),
+        line,
+        problem: e.message().to_string(),
     }
 }
 
