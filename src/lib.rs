@@ -14,6 +14,7 @@ pub mod estimate;
 pub mod eval;
 pub mod frame;
 pub mod gige;
+pub mod guidance;
 pub mod notify;
 pub mod pipeline;
 pub mod publish;
