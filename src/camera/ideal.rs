@@ -6,8 +6,9 @@
 
 use super::{Calibration, FovMask, Mounting, OcamModel};
 
-/// The ideal lenses omnirow ships.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// The ideal lenses omnirow ships (in configuration files: `fisheye185`, `pal`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum IdealLens {
     /// Equidistant 185° fisheye whose image circle fits the sensor's height.
     Fisheye185,
