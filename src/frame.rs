@@ -137,6 +137,9 @@ pub struct GroundTruth {
     /// Lateral offset of the camera from the nearest row, metres: world y of the camera
     /// minus world y of that row, in (−spacing/2, spacing/2].
     pub lateral_offset_m: f64,
+    /// The camera's world y (row i runs along y = i·`row_spacing_m`), metres.
+    #[serde(default)]
+    pub camera_lateral_m: f64,
     pub row_spacing_m: f64,
     pub plant_distance_m: f64,
     /// Noise settings used to render the image.

@@ -15,6 +15,7 @@ pub mod estimate;
 pub mod eval;
 pub mod frame;
 pub mod gige;
+pub mod guidance;
 pub mod logging;
 pub mod notify;
 pub mod pipeline;

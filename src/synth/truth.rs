@@ -35,6 +35,7 @@ impl GroundTruth {
             tilt_rad: pose.tilt(),
             height_m: o.height_m,
             lateral_offset_m: lateral,
+            camera_lateral_m: o.lateral_m,
             row_spacing_m: s,
             plant_distance_m: o.plant_distance_m,
             noise: NoiseTruth {
