@@ -137,6 +137,11 @@ fn live_view_shows_the_status_numbers_frame_and_plot() {
             "#{id} shows {shown}, /status says {want}"
         );
     }
+    // The guidance's lateral offset in centimetres, or a dash while the node has none.
+    match latest["guidance"]["lateral_offset_m"].as_f64() {
+        Some(m) => assert!((number(&dom, "offset") - m * 100.0).abs() <= 0.051),
+        None => assert_eq!(text_of(&dom, "offset"), "–"),
+    }
     let fps = number(&dom, "fps");
     // Up to 15 fps; a loaded machine may detect fewer.
     assert!(fps > 1.0 && fps < 20.0, "fps shown {fps}");

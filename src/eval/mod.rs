@@ -6,6 +6,7 @@
 //! charts (drawn with plotters, [`chart`]) `omnirow eval` writes.
 
 pub mod chart;
+pub mod real;
 pub mod report;
 mod run;
 pub mod stats;

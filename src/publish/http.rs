@@ -9,12 +9,12 @@
 //! [`HttpOptions::header_timeout`] and in at most [`HttpOptions::max_header_bytes`], a
 //! connection lives at most [`HttpOptions::connection_lifetime`], and at most
 //! [`HttpOptions::max_connections`] are open at once (beyond that new ones are closed at
-//! once). The service reads the pipeline's shared state; it never slows the pipeline down.
+//! once). The service reads the node's [`crate::status`]; it never slows the pipeline down.
 
 use super::live::{History, StatusDocument};
 use super::metrics::metrics;
-use crate::pipeline::{Latest, Shared};
 use crate::source::SourceState;
+use crate::status::{Latest, Shared};
 use bytes::Bytes;
 use http_body_util::Full;
 use hyper::header::{HeaderValue, CACHE_CONTROL, CONTENT_TYPE};

@@ -4,7 +4,7 @@
 //! nothing from elsewhere). Schemas in docs/http.md.
 
 use crate::estimate::{Estimate, Status};
-use crate::pipeline::{Shared, StatusSummary};
+use crate::status::{Shared, StatusSummary};
 use serde::Serialize;
 use std::collections::VecDeque;
 use std::sync::Mutex;
@@ -61,6 +61,8 @@ pub struct HistoryPoint {
     pub heading_rad: Option<f64>,
     pub tilt_rad: Option<f64>,
     pub quality: f64,
+    /// The guidance's lateral offset from the followed row, metres (`null` without guidance).
+    pub lateral_offset_m: Option<f64>,
 }
 
 /// The `/history.json` document.
@@ -113,6 +115,7 @@ impl History {
             heading_rad: e.heading_rad,
             tilt_rad: e.tilt_rad,
             quality: e.quality,
+            lateral_offset_m: e.guidance.as_ref().and_then(|g| g.lateral_offset_m),
         });
         let oldest = t_s - self.window.as_secs_f64();
         while points.front().is_some_and(|p| p.t_s < oldest) {

@@ -3,8 +3,8 @@
 //! its `# HELP` and `# TYPE` lines. Checked against the Prometheus project's own parser in
 //! tests/http_service.rs.
 
-use crate::pipeline::Shared;
 use crate::source::SourceState;
+use crate::status::Shared;
 
 /// A sample value as the exposition format spells it (`NaN`, `+Inf`, `-Inf`, or a number).
 fn sample_value(v: f64) -> String {
