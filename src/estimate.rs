@@ -1,7 +1,7 @@
 //! The per-frame estimate: what the node publishes for every frame.
 //!
 //! Owns [`Estimate`], the versioned JSON document that goes out over UDP, stdout and into
-//! recordings (schema in the README), its [`Status`], and the conversion from a detector
+//! recordings (schema in docs/node.md), its [`Status`], and the conversion from a detector
 //! [`Detection`](crate::detect::Detection) plus the frame's timestamps. Vectors are unit vectors
 //! in the calibration's OCamCalib camera frame; angles are radians; times are nanoseconds since
 //! the UNIX epoch. Schema version 2 adds `guidance` (see [`crate::guidance`] and
