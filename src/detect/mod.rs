@@ -10,6 +10,7 @@ pub mod edge;
 pub mod hough;
 pub mod mask;
 pub mod overlay;
+pub mod pencil;
 pub mod pose;
 pub mod refit;
 pub mod smooth;
@@ -48,6 +49,7 @@ impl Method {
             Method::Hough => "hough",
             Method::Edge => "edge",
             Method::Combined => "combined",
+            Method::Pencil => "pencil",
         }
     }
 }
@@ -81,6 +83,9 @@ pub enum Method {
     Hough,
     Edge,
     Combined,
+    /// Rows as the peaks of the vegetation across the pencil of great circles through the
+    /// vanishing point that makes them sharpest ([`pencil`]).
+    Pencil,
 }
 
 /// A row: the great circle where its plane cuts the unit sphere.
