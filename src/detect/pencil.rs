@@ -59,6 +59,12 @@ pub struct PencilOptions {
     /// implies) fall out of the profile; without the penalty, a candidate below the true
     /// vanishing point drops the far field, where the rows merge, and looks sharper.
     pub coverage_power: f64,
+    /// Refit the rows found on the image's pixels near each (the Hough method's refit), and
+    /// the vanishing point on them (see `Detector`'s pencil path).
+    pub polish: bool,
+    /// The polish's band around a row is a quarter of the angle to its nearest neighbour
+    /// (around the vanishing point), at most this (degrees).
+    pub polish_max_band_deg: f64,
 }
 
 impl Default for PencilOptions {
@@ -78,6 +84,8 @@ impl Default for PencilOptions {
             max_tan: 4.0,
             candidates: 4,
             coverage_power: 2.0,
+            polish: true,
+            polish_max_band_deg: 3.0,
         }
     }
 }
@@ -103,6 +111,12 @@ impl PencilOptions {
             return Err(DetectError::Options(format!(
                 "pencil.reference_px = {} must be at least twice pencil.bin_px = {}",
                 self.reference_px, self.bin_px
+            )));
+        }
+        if !(self.polish_max_band_deg > 0.0 && self.polish_max_band_deg <= 30.0) {
+            return Err(DetectError::Options(format!(
+                "pencil.polish_max_band_deg = {} must be within (0, 30]",
+                self.polish_max_band_deg
             )));
         }
         if !(0.0..=10.0).contains(&self.coverage_power) {
