@@ -6,6 +6,7 @@
 //! found by validation are reported at once. Every key is optional: a missing key takes the
 //! default that `config/omnirow.toml` shows.
 
+use crate::camera::IdealLens;
 use crate::detect::DetectorOptions;
 use crate::gige::GigeConfig;
 use crate::pipeline::PipelineOptions;
@@ -69,14 +70,6 @@ pub enum SourceConfig {
     Camera(GigeConfig),
 }
 
-/// The ideal lenses omnirow ships.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Lens {
-    Fisheye185,
-    Pal,
-}
-
 /// Replay of a recording or an image folder.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ReplayConfig {
@@ -93,7 +86,7 @@ pub struct ReplayConfig {
 pub enum CalibrationChoice {
     /// The source's own (the synthetic lens), or the ideal fisheye for replays.
     Auto,
-    Ideal(Lens),
+    Ideal(IdealLens),
     File(PathBuf),
 }
 
@@ -212,7 +205,7 @@ struct RawSynthetic {
     fps: S<f64>,
     width: S<u32>,
     height: S<u32>,
-    lens: S<Lens>,
+    lens: S<IdealLens>,
     colour: S<bool>,
     seed: S<u64>,
     speed_mps: S<f64>,
@@ -471,7 +464,7 @@ fn validate(raw: RawConfig, c: &mut Check) -> Config {
                 fps: c.range("source.synthetic.fps", &syn.fps, 15.0, 0.1, 1000.0),
                 width,
                 height,
-                lens: c.get(&syn.lens, Lens::Fisheye185),
+                lens: c.get(&syn.lens, IdealLens::Fisheye185),
                 colour: c.get(&syn.colour, true),
                 seed: c.get(&syn.seed, 1),
                 speed_mps: c.range("source.synthetic.speed_mps", &syn.speed_mps, 1.0, 0.0, 20.0),
@@ -570,8 +563,8 @@ fn validate(raw: RawConfig, c: &mut Check) -> Config {
         None => CalibrationChoice::Auto,
         Some(s) => match s.get_ref().as_str() {
             "" | "auto" => CalibrationChoice::Auto,
-            "ideal:fisheye185" => CalibrationChoice::Ideal(Lens::Fisheye185),
-            "ideal:pal" => CalibrationChoice::Ideal(Lens::Pal),
+            "ideal:fisheye185" => CalibrationChoice::Ideal(IdealLens::Fisheye185),
+            "ideal:pal" => CalibrationChoice::Ideal(IdealLens::Pal),
             other if other.starts_with("ideal:") => {
                 c.bad(
                     "camera.calibration",

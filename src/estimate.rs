@@ -4,14 +4,17 @@
 //! recordings (schema in the README), its [`Status`], and the conversion from a detector
 //! [`Detection`](crate::detect::Detection) plus the frame's timestamps. Vectors are unit vectors
 //! in the calibration's OCamCalib camera frame; angles are radians; times are nanoseconds since
-//! the UNIX epoch.
+//! the UNIX epoch. Schema version 2 adds `guidance` (see [`crate::guidance`] and
+//! docs/guidance.md): the robot's metric pose relative to the rows, present when the node runs
+//! row guidance; every version 1 field is unchanged.
 
 use crate::detect::{Detection, Method};
 use crate::frame::Frame;
+use crate::guidance::GuidanceEstimate;
 use serde::{Deserialize, Serialize};
 
 /// The version of the [`Estimate`] JSON schema. Bumped on any incompatible change.
-pub const SCHEMA_VERSION: u32 = 1;
+pub const SCHEMA_VERSION: u32 = 2;
 
 /// What kind of answer an estimate carries.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -61,6 +64,26 @@ pub struct TruthEstimate {
     /// Direction along the rows (sign free).
     pub vanishing_point: [f64; 3],
     pub lateral_offset_m: f64,
+    /// The camera's position across the rows (world y; row i runs along y = i·spacing),
+    /// metres: continuous, unlike `lateral_offset_m` (schema 2).
+    #[serde(default)]
+    pub camera_lateral_m: f64,
+    /// The field's row spacing, metres (schema 2).
+    #[serde(default)]
+    pub row_spacing_m: f64,
+}
+
+impl TruthEstimate {
+    /// Offset of the camera from the centre line of the inter-row path `path` (the path
+    /// between rows `path` and `path + 1`), metres, positive to the left.
+    pub fn path_offset_m(&self, path: i64) -> f64 {
+        self.camera_lateral_m - (path as f64 + 0.5) * self.row_spacing_m
+    }
+
+    /// The inter-row path the camera is in.
+    pub fn path(&self) -> i64 {
+        (self.camera_lateral_m / self.row_spacing_m).floor() as i64
+    }
 }
 
 /// The per-frame estimate, as published (one JSON object).
@@ -94,6 +117,9 @@ pub struct Estimate {
     pub error: Option<String>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub truth: Option<TruthEstimate>,
+    /// Row guidance (schema 2), when the node runs it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub guidance: Option<GuidanceEstimate>,
 }
 
 impl Estimate {
@@ -151,7 +177,10 @@ impl Estimate {
                 tilt_rad: t.tilt_rad,
                 vanishing_point: t.vp_along,
                 lateral_offset_m: t.lateral_offset_m,
+                camera_lateral_m: t.camera_lateral_m,
+                row_spacing_m: t.row_spacing_m,
             }),
+            guidance: None,
         }
     }
 
@@ -173,6 +202,7 @@ impl Estimate {
             quality: 0.0,
             error: None,
             truth: None,
+            guidance: None,
         }
     }
 
@@ -251,7 +281,7 @@ mod tests {
         assert!((e.latency_ms - 3.0).abs() < 1e-9);
         let text = e.to_json();
         assert!(text.contains("\"status\":\"no_rows\""));
-        assert!(text.contains("\"schema_version\":1"));
+        assert!(text.contains("\"schema_version\":2"));
         assert!(!text.contains("truth"));
         let back: Estimate = serde_json::from_str(&text).unwrap();
         assert_eq!(back, e);

@@ -109,7 +109,62 @@ pub struct Frame {
     pub format: PixelFormat,
     pub data: Vec<u8>,
     /// Ground truth, for synthetic frames.
-    pub truth: Option<Arc<crate::synth::GroundTruth>>,
+    pub truth: Option<Arc<GroundTruth>>,
+}
+
+/// Ground truth of one synthetic image (computed by [`GroundTruth::of_scene`] in
+/// [`crate::synth`]).
+///
+/// The row normals are those of the ideal row lines (plants without position error) in the
+/// plane through the camera centre; rows whose plants are displaced across the row still
+/// list the ideal line's normal. Vectors are unit vectors in the calibration's
+/// OCamCalib camera frame (x down the image rows, y along the columns, z back out of the lens).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct GroundTruth {
+    /// Direction along the rows (the vanishing point of the rows). Sign is free.
+    pub vp_along: [f64; 3],
+    /// Direction across the rows (the second, orthogonal vanishing point). Sign is free.
+    pub vp_across: [f64; 3],
+    /// Robot pose relative to the rows, radians: yaw (about up), pitch, roll.
+    pub yaw_rad: f64,
+    pub pitch_rad: f64,
+    pub roll_rad: f64,
+    /// Heading and tilt as omnirow reports them (row direction in the robot frame).
+    pub heading_rad: f64,
+    pub tilt_rad: f64,
+    /// Camera height above the ground, metres.
+    pub height_m: f64,
+    /// Lateral offset of the camera from the nearest row, metres: world y of the camera
+    /// minus world y of that row, in (−spacing/2, spacing/2].
+    pub lateral_offset_m: f64,
+    /// The camera's world y (row i runs along y = i·`row_spacing_m`), metres.
+    #[serde(default)]
+    pub camera_lateral_m: f64,
+    pub row_spacing_m: f64,
+    pub plant_distance_m: f64,
+    /// Noise settings used to render the image.
+    pub noise: NoiseTruth,
+    /// Plane normal of every row visible in the image (sign free).
+    pub row_normals: Vec<[f64; 3]>,
+    /// For each entry of `row_normals`: the row's position across the rows relative to the
+    /// camera (world y of the row minus world y of the camera), metres.
+    #[serde(default)]
+    pub row_lateral_m: Vec<f64>,
+    /// Seed the image was rendered from.
+    pub seed: u64,
+}
+
+/// The noise settings recorded with the ground truth.
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct NoiseTruth {
+    /// Salt-and-pepper density of the background noise (0..1).
+    pub background_density: f64,
+    /// Standard deviation of the plant position error along the row, metres.
+    pub along_row_sd_m: f64,
+    /// Standard deviation of the plant position error across the row, metres.
+    pub across_row_sd_m: f64,
+    /// Number of weeds placed at random.
+    pub weeds: usize,
 }
 
 impl Frame {

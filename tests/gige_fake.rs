@@ -4,7 +4,7 @@
 //! the true heading and tilt. Also: a camera that is not there never stops the source.
 #![cfg(feature = "camera")]
 
-use omnirow::config::Lens;
+use omnirow::camera::IdealLens;
 use omnirow::detect::{Detection, Detector, DetectorOptions};
 use omnirow::estimate::{Estimate, Status};
 use omnirow::frame::PixelFormat;
@@ -205,7 +205,7 @@ fn injected_synthetic_field_gives_the_true_heading_and_tilt() {
         fps: 1000.0,
         width: W,
         height: H,
-        lens: Lens::Fisheye185,
+        lens: IdealLens::Fisheye185,
         colour: true,
         seed: 11,
         speed_mps: 1.0,

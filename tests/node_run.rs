@@ -38,7 +38,7 @@ fn synthetic_drive_publishes_udp_estimates_matching_truth() {
     assert_eq!(est.len(), 30, "every frame published once");
     for (i, e) in est.iter().enumerate() {
         assert_eq!(e.seq, i as u64, "in frame order");
-        assert_eq!(e.schema_version, 1);
+        assert_eq!(e.schema_version, 2);
         assert!(e.latency_ms >= e.detector_ms && e.latency_ms < 1000.0);
         assert!(e.capture_ns > 0 && e.receive_ns >= e.capture_ns);
     }

@@ -6,8 +6,9 @@
 
 use super::{Calibration, FovMask, Mounting, OcamModel};
 
-/// The ideal lenses omnirow ships.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// The ideal lenses omnirow ships (in configuration files: `fisheye185`, `pal`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum IdealLens {
     /// Equidistant 185° fisheye whose image circle fits the sensor's height.
     Fisheye185,
@@ -40,7 +41,7 @@ impl IdealLens {
 }
 
 /// Fits the direct polynomial f(rho) = -rho / tan(alpha(rho)) with ss[1] = 0 over [0, rho_max].
-fn fit_direct(alpha: impl Fn(f64) -> f64, rho_max: f64, degree: usize) -> Vec<f64> {
+pub(super) fn fit_direct(alpha: impl Fn(f64) -> f64, rho_max: f64, degree: usize) -> Vec<f64> {
     // Unknowns: a0, a2, a3, ..., a_degree in the normalised variable u = rho / rho_max.
     let n = 600;
     let cols = degree; // a0 plus a2..a_degree

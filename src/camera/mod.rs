@@ -9,9 +9,11 @@
 
 mod ideal;
 mod ocam;
+mod pinhole;
 
 pub use ideal::{ideal_fisheye, ideal_pal, IdealLens};
 pub use ocam::{CalibError, OcamModel};
+pub use pinhole::{ConversionError, DistortionModel, Pinhole, PinholeToml};
 
 use nalgebra::{Rotation3, Vector3};
 use serde::{Deserialize, Serialize};
@@ -44,20 +46,66 @@ impl FovMask {
     }
 }
 
-/// The camera's mounting on the robot, as a rotation applied after the default pose.
+/// The camera's mounting on the robot: a rotation applied after the default pose, the
+/// camera's position in base_link and its height above the ground.
 ///
-/// Default (all zero): the camera looks straight down, the top of the image towards the
+/// Default (angles zero): the camera looks straight down, the top of the image towards the
 /// robot's front. Robot frame as ROS REP 103: x forward, y left, z up. The rotation from
 /// camera to robot is `Rz(yaw) · Ry(pitch) · Rx(roll) · R0`, with R0 the default pose.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+/// The height (default 1 m) and position (default the base_link origin) place the rows on the
+/// ground for row guidance (see docs/guidance.md); the detector needs neither.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct Mounting {
     pub roll_deg: f64,
     pub pitch_deg: f64,
     pub yaw_deg: f64,
+    /// Height of the camera's centre (single effective viewpoint) above the ground, metres.
+    pub height_m: f64,
+    /// The camera's centre in base_link (x forward, y left, z up), metres.
+    pub position_m: [f64; 3],
+}
+
+impl Default for Mounting {
+    fn default() -> Self {
+        Mounting {
+            roll_deg: 0.0,
+            pitch_deg: 0.0,
+            yaw_deg: 0.0,
+            height_m: 1.0,
+            position_m: [0.0; 3],
+        }
+    }
 }
 
 impl Mounting {
+    /// Checks the angles (degrees within ±360), the height (0 < h ≤ 20 m) and the position
+    /// (finite, within 50 m of base_link).
+    pub fn validate(&self) -> Result<(), String> {
+        for (k, v) in [
+            ("roll_deg", self.roll_deg),
+            ("pitch_deg", self.pitch_deg),
+            ("yaw_deg", self.yaw_deg),
+        ] {
+            if !v.is_finite() || v.abs() > 360.0 {
+                return Err(format!("{k} = {v} is not an angle in degrees within ±360"));
+            }
+        }
+        if !(self.height_m > 0.0 && self.height_m <= 20.0) {
+            return Err(format!(
+                "height_m = {} is not a camera height above the ground in metres (0 < h <= 20)",
+                self.height_m
+            ));
+        }
+        if let Some(v) = self.position_m.iter().find(|v| !v.is_finite() || v.abs() > 50.0) {
+            return Err(format!(
+                "position_m = {:?}: {v} is not a position in metres within ±50 of base_link",
+                self.position_m
+            ));
+        }
+        Ok(())
+    }
+
     /// The default pose: OCamCalib camera axes expressed in the robot frame.
     /// Camera x (image down) = robot −x, camera y (image right) = robot −y, camera z = robot z (up).
     pub fn default_rotation() -> Rotation3<f64> {
@@ -134,19 +182,14 @@ impl Calibration {
         }
     }
 
-    /// Parses omnirow's TOML calibration.
+    /// Parses omnirow's TOML calibration: the Taylor model's keys, or a `[pinhole]` table
+    /// (a perspective camera, converted to the Taylor model).
     pub fn parse_toml(text: &str, path: &Path) -> Result<Self, CalibError> {
-        let raw: CalibrationToml = toml::from_str(text).map_err(|e| {
-            let line = e
-                .span()
-                .map(|s| text[..s.start.min(text.len())].lines().count().max(1))
-                .unwrap_or(1);
-            CalibError::Parse {
-                path: path.to_path_buf(),
-                line,
-                problem: e.message().to_string(),
-            }
-        })?;
+        let raw: CalibrationToml = if pinhole::is_pinhole_toml(text) {
+            pinhole::parse_toml(text, path)?.0
+        } else {
+            toml::from_str(text).map_err(|e| toml_error(text, path, e))?
+        };
         let invalid = |problem: String| CalibError::Invalid {
             path: path.to_path_buf(),
             problem,
@@ -162,17 +205,9 @@ impl Calibration {
         if let Some(m) = &raw.mask {
             m.validate().map_err(|p| invalid(format!("[mask]: {p}")))?;
         }
-        for (k, v) in [
-            ("roll_deg", raw.mounting.roll_deg),
-            ("pitch_deg", raw.mounting.pitch_deg),
-            ("yaw_deg", raw.mounting.yaw_deg),
-        ] {
-            if !v.is_finite() || v.abs() > 360.0 {
-                return Err(invalid(format!(
-                    "[mounting] {k} = {v} is not an angle in degrees within ±360"
-                )));
-            }
-        }
+        raw.mounting
+            .validate()
+            .map_err(|p| invalid(format!("[mounting] {p}")))?;
         Ok(Calibration {
             model,
             mask: raw.mask,
@@ -182,8 +217,13 @@ impl Calibration {
 
     /// The calibration as omnirow TOML.
     pub fn to_toml(&self) -> String {
+        toml::to_string(&self.raw_toml()).unwrap_or_default()
+    }
+
+    /// The calibration as the TOML file's keys.
+    fn raw_toml(&self) -> CalibrationToml {
         let m = &self.model;
-        let raw = CalibrationToml {
+        CalibrationToml {
             height: m.height,
             width: m.width,
             centre: [m.xc, m.yc],
@@ -192,8 +232,7 @@ impl Calibration {
             invpol: m.invpol.clone(),
             mask: self.mask,
             mounting: self.mounting,
-        };
-        toml::to_string(&raw).unwrap_or_default()
+        }
     }
 
     /// Image height and width of the calibration.
@@ -336,6 +375,19 @@ impl Calibration {
     }
 }
 
+/// A TOML parse error as a calibration error naming the file and the line.
+fn toml_error(text: &str, path: &Path, e: toml::de::Error) -> CalibError {
+    let line = e
+        .span()
+        .map(|s| text[..s.start.min(text.len())].lines().count().max(1))
+        .unwrap_or(1);
+    CalibError::Parse {
+        path: path.to_path_buf(),
+        line,
+        problem: e.message().to_string(),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -368,6 +420,39 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("extra"), "{e}");
+    }
+
+    #[test]
+    fn mounting_height_and_position_keys() {
+        let cal = ideal_fisheye(2050, 2448);
+        let text = cal.to_toml();
+        assert!(text.contains("height_m = 1.0"), "{text}");
+        let back = Calibration::parse_toml(&text, Path::new("c.toml")).unwrap();
+        assert_eq!(back.mounting, Mounting::default());
+        // a file without the new keys keeps the defaults
+        let old = text
+            .lines()
+            .filter(|l| !l.starts_with("height_m") && !l.starts_with("position_m"))
+            .collect::<Vec<_>>()
+            .join("\n");
+        let back = Calibration::parse_toml(&old, Path::new("c.toml")).unwrap();
+        assert_eq!(back.mounting.height_m, 1.0);
+        for (good, bad, key) in [
+            ("height_m = 1.0", "height_m = 0.0", "height_m"),
+            ("height_m = 1.0", "height_m = -1.0", "height_m"),
+            (
+                "position_m = [0.0, 0.0, 0.0]",
+                "position_m = [0.0, 100.0, 0.0]",
+                "position_m",
+            ),
+        ] {
+            assert!(text.contains(good), "{text}");
+            let t = text.replace(good, bad);
+            let e = Calibration::parse_toml(&t, Path::new("c.toml"))
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(key) && e.contains("[mounting]"), "{e}");
+        }
     }
 
     #[test]

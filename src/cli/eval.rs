@@ -4,13 +4,16 @@ use crate::camera::Calibration;
 use crate::detect::Method;
 use crate::eval::{self, EvalOptions, Lens};
 use anyhow::Context;
-use clap::Args;
+use clap::{Args, Subcommand};
 use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
 #[derive(Debug, Args)]
+#[command(args_conflicts_with_subcommands = true)]
 pub struct EvalArgs {
+    #[command(subcommand)]
+    pub command: Option<EvalCommand>,
     /// Folder for README.md (the tables), the PNG plots and outcomes.jsonl.
     #[arg(long, default_value = "eval-out")]
     pub out: PathBuf,
@@ -44,7 +47,17 @@ pub struct EvalArgs {
     pub methods: Vec<String>,
 }
 
+/// Evaluations other than the paper's synthetic protocol.
+#[derive(Debug, Subcommand)]
+pub enum EvalCommand {
+    /// Score the detector on real images with labelled crop rows (docs/real.md).
+    Real(super::eval_real::RealArgs),
+}
+
 pub fn run(a: EvalArgs) -> anyhow::Result<ExitCode> {
+    if let Some(EvalCommand::Real(r)) = a.command {
+        return super::eval_real::run(r);
+    }
     let lenses = if a.lenses.is_empty() {
         Lens::builtin()
     } else {

@@ -8,6 +8,7 @@ mod cameras;
 mod config;
 pub mod detect;
 mod eval;
+mod eval_real;
 mod run;
 mod synth;
 

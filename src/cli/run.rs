@@ -9,11 +9,11 @@
 //! exit at once; the main loop polls the flag every 20 ms.
 
 use crate::camera::{Calibration, IdealLens};
-use crate::config::{CalibrationChoice, Config, Lens, LogFormat, SourceConfig, StdoutMode};
+use crate::config::{CalibrationChoice, Config, LogFormat, SourceConfig, StdoutMode};
 use crate::detect::{Detection, Detector};
 use crate::frame::ImageView;
 use crate::notify::Notifier;
-use crate::pipeline::{Latest, Pipeline, Processor};
+use crate::pipeline::{Pipeline, Processor};
 use crate::publish::http::{HttpServer, OverlayFn};
 use crate::publish::stdout::StdoutPublisher;
 use crate::publish::udp::{UdpOptions, UdpPublisher};
@@ -23,6 +23,7 @@ use crate::source::folder::{FolderOptions, FolderReplay};
 use crate::source::mcap_replay::{McapReplay, McapReplayOptions};
 use crate::source::synthetic::SyntheticDrive;
 use crate::source::{Rate, Source, SourceState};
+use crate::status::Latest;
 use anyhow::{bail, Context};
 use clap::Args;
 use std::io::IsTerminal;
@@ -137,8 +138,8 @@ fn configure(args: &RunArgs) -> anyhow::Result<Config> {
     }
     if let Some(c) = &args.calib {
         cfg.calibration = match c.as_str() {
-            "ideal:fisheye185" => CalibrationChoice::Ideal(Lens::Fisheye185),
-            "ideal:pal" => CalibrationChoice::Ideal(Lens::Pal),
+            "ideal:fisheye185" => CalibrationChoice::Ideal(IdealLens::Fisheye185),
+            "ideal:pal" => CalibrationChoice::Ideal(IdealLens::Pal),
             "auto" => CalibrationChoice::Auto,
             p => CalibrationChoice::File(PathBuf::from(p)),
         };
@@ -178,13 +179,6 @@ fn init_logging(cfg: &Config) {
     } else {
         builder.try_init()
     };
-}
-
-fn ideal(lens: Lens) -> IdealLens {
-    match lens {
-        Lens::Fisheye185 => IdealLens::Fisheye185,
-        Lens::Pal => IdealLens::Pal,
-    }
 }
 
 /// The GigE Vision camera of `[gige]` (`[source] kind = "camera"`).
@@ -250,7 +244,7 @@ pub fn run(args: RunArgs, record_to: Option<PathBuf>) -> anyhow::Result<ExitCode
     };
     let cal = match &cfg.calibration {
         CalibrationChoice::File(p) => Calibration::load(p)?,
-        CalibrationChoice::Ideal(l) => ideal(*l).calibration(2050, 2448),
+        CalibrationChoice::Ideal(l) => l.calibration(2050, 2448),
         CalibrationChoice::Auto => match source.calibration() {
             Some(c) => c.clone(),
             None => {

@@ -66,7 +66,7 @@ mod tests {
             roll in -30.0f64..30.0, pitch in -30.0f64..30.0, yaw in -180.0f64..180.0,
             flip in proptest::bool::ANY)
         {
-            let m = Mounting { roll_deg: roll, pitch_deg: pitch, yaw_deg: yaw };
+            let m = Mounting { roll_deg: roll, pitch_deg: pitch, yaw_deg: yaw, ..Mounting::default() };
             let d = Vector3::new(tilt.cos() * heading.cos(), tilt.cos() * heading.sin(), tilt.sin());
             let mut vp = m.robot_from_camera().inverse() * d;
             if flip { vp = -vp; }

@@ -7,6 +7,7 @@
 
 pub mod font;
 pub mod plot;
+pub mod real;
 pub mod report;
 mod run;
 pub mod stats;

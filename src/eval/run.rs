@@ -459,6 +459,7 @@ mod tests {
             tilt_rad: 0.0,
             height_m: 1.0,
             lateral_offset_m: 0.0,
+            camera_lateral_m: 0.0,
             row_spacing_m: 0.5,
             plant_distance_m: 0.1,
             noise: Default::default(),

@@ -7,8 +7,8 @@
 //! pipeline's shared state; it never slows the pipeline down (the overlay is drawn on request,
 //! from the latest frame, and cached per frame).
 
-use crate::pipeline::{Latest, Shared};
 use crate::source::SourceState;
+use crate::status::{Latest, Shared};
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::{SocketAddr, TcpListener, TcpStream};
 use std::sync::atomic::{AtomicBool, Ordering};

@@ -1,11 +1,11 @@
 //! Publishing: where estimates go.
 //!
 //! Owns the [`Publisher`] seam the pipeline's publisher thread calls for every estimate (in
-//! frame order) and once per status interval, and the publishers omnirow ships: UDP JSON
-//! datagrams to unicast or multicast destinations ([`udp`]), JSON lines on stdout
-//! ([`stdout`]), and the HTTP endpoint with /healthz, /metrics and /overlay.png ([`http`],
-//! which reads the pipeline's shared state instead of being called). A ROS 2 publisher plugs
-//! in as one more [`Publisher`].
+//! frame order) and with the [`StatusSummary`] once per status interval, and the publishers
+//! omnirow ships: UDP JSON datagrams to unicast or multicast destinations ([`udp`]), JSON lines
+//! on stdout ([`stdout`]), and the HTTP endpoint with /healthz, /metrics and /overlay.png
+//! ([`http`], which reads the node's [`crate::status`] instead of being called). A ROS 2
+//! publisher plugs in as one more [`Publisher`].
 
 pub mod http;
 pub mod stdout;
@@ -13,7 +13,7 @@ pub mod udp;
 
 use crate::estimate::Estimate;
 use crate::frame::Frame;
-use crate::pipeline::StatusSummary;
+use crate::status::StatusSummary;
 use std::sync::Arc;
 
 /// Errors of a publisher (never fatal to the pipeline: it logs them and goes on).

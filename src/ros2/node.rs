@@ -10,8 +10,8 @@ use super::config::Ros2Config;
 use super::error::Ros2Error;
 use super::input::{RosEstimate, RosStatus};
 use crate::estimate::Estimate;
-use crate::pipeline::StatusSummary;
 use crate::publish::Publisher;
+use crate::status::StatusSummary;
 
 impl<'a> From<&'a Estimate> for RosEstimate<'a> {
     fn from(e: &'a Estimate) -> Self {

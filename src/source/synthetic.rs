@@ -10,7 +10,6 @@
 
 use super::{Poll, Source, SourceError, SourceState};
 use crate::camera::{Calibration, IdealLens};
-use crate::config::Lens;
 use crate::frame::{now_ns, Frame};
 use crate::synth::{GroundTruth, Renderer, Scene, Style, SynthError, SynthOptions};
 use std::f64::consts::TAU;
@@ -23,7 +22,7 @@ pub struct SyntheticDriveOptions {
     pub fps: f64,
     pub width: u32,
     pub height: u32,
-    pub lens: Lens,
+    pub lens: IdealLens,
     /// Bayer RGGB colour frames (as the GC2450C delivers); false: the paper's grey style.
     pub colour: bool,
     pub seed: u64,
@@ -62,11 +61,7 @@ pub struct SyntheticDrive {
 impl SyntheticDrive {
     /// Builds the renderer (heavy, once).
     pub fn new(opts: SyntheticDriveOptions) -> Result<Self, SynthError> {
-        let lens = match opts.lens {
-            Lens::Fisheye185 => IdealLens::Fisheye185,
-            Lens::Pal => IdealLens::Pal,
-        };
-        let cal = lens.calibration(opts.height, opts.width);
+        let cal = opts.lens.calibration(opts.height, opts.width);
         let mut renderer = Renderer::new(&cal)?;
         if opts.render_threads > 0 {
             renderer = renderer.with_threads(opts.render_threads);
@@ -175,7 +170,7 @@ mod tests {
             fps: 1000.0,
             width: 96,
             height: 80,
-            lens: Lens::Fisheye185,
+            lens: IdealLens::Fisheye185,
             colour: true,
             seed: 3,
             speed_mps: 1.0,

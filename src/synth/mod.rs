@@ -29,7 +29,8 @@ pub use render::Renderer;
 pub use rng::Rng;
 pub use scene::Scene;
 pub use style::{Palette, Texture};
-pub use truth::{GroundTruth, NoiseTruth};
+// The truth of every image; frames carry it, so it is defined with them.
+pub use crate::frame::{GroundTruth, NoiseTruth};
 
 use crate::camera::Calibration;
 use crate::frame::PixelFormat;

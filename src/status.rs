@@ -1,0 +1,330 @@
+//! The running node's status: what the pipeline threads report and the monitors read.
+//!
+//! Owns [`Shared`] — frame counters, drop counters, detector and latency samples, the source's
+//! state, the recording's state, the latest published frame and each thread's heartbeat —
+//! and the [`StatusSummary`] built from it once a second for the log, the publishers, the
+//! HTTP endpoint and systemd. The pipeline writes it (through the crate-internal counting
+//! methods); everything else only reads it.
+
+use crate::detect::Detection;
+use crate::estimate::{Estimate, Status};
+use crate::frame::Frame;
+use crate::source::SourceState;
+use std::collections::{BTreeMap, VecDeque};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+/// The status summary: once a second in the log, to the publishers, on /metrics.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct StatusSummary {
+    pub uptime_s: f64,
+    pub frames_in: u64,
+    pub frames_out: u64,
+    /// Frames dropped by the drop-oldest policy (detector too slow).
+    pub dropped: u64,
+    /// Frames or estimates the recorder dropped (disk too slow).
+    pub record_dropped: u64,
+    pub detector_errors: u64,
+    /// Frames per second in and out over the last status interval.
+    pub fps_in: f64,
+    pub fps_out: f64,
+    /// Detector time per frame over the last 1024 frames, milliseconds.
+    pub detector_p50_ms: f64,
+    pub detector_p99_ms: f64,
+    /// End-to-end latency (receive → publish) over the last 1024 frames, milliseconds.
+    pub latency_p50_ms: f64,
+    pub latency_p99_ms: f64,
+    pub source_state: SourceState,
+    pub recording: String,
+    pub recorded_frames: u64,
+    /// Estimates published per status since the start.
+    pub status_counts: BTreeMap<String, u64>,
+}
+
+/// The latest published frame with its detection (for /overlay.png).
+#[derive(Debug, Clone)]
+pub struct Latest {
+    pub frame: Arc<Frame>,
+    pub detection: Detection,
+    pub estimate: Estimate,
+}
+
+/// State shared by the pipeline threads and read by the monitors (HTTP, systemd).
+pub struct Shared {
+    started: Instant,
+    stop: AtomicBool,
+    frames_in: AtomicU64,
+    frames_out: AtomicU64,
+    dropped: AtomicU64,
+    record_dropped: AtomicU64,
+    detector_errors: AtomicU64,
+    recorded_frames: AtomicU64,
+    source_state: Mutex<SourceState>,
+    recording: Mutex<String>,
+    samples: Mutex<Samples>,
+    latest: Mutex<Option<Latest>>,
+    /// Last loop time of each thread, ns since `started` (0 = finished).
+    heartbeats: Mutex<Vec<(&'static str, u64)>>,
+    rates: Mutex<Rates>,
+    source_error: Mutex<Option<String>>,
+}
+
+#[derive(Default)]
+struct Samples {
+    detector_ms: VecDeque<f64>,
+    latency_ms: VecDeque<f64>,
+    status_counts: BTreeMap<String, u64>,
+}
+
+struct Rates {
+    at: Instant,
+    frames_in: u64,
+    frames_out: u64,
+    fps_in: f64,
+    fps_out: f64,
+}
+
+const SAMPLE_WINDOW: usize = 1024;
+/// A thread that has not looped for this long counts as stuck.
+const STUCK_AFTER: Duration = Duration::from_secs(5);
+
+fn percentile(v: &VecDeque<f64>, p: f64) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    let mut s: Vec<f64> = v.iter().copied().collect();
+    s.sort_by(f64::total_cmp);
+    let i = ((p * (s.len() - 1) as f64).round() as usize).min(s.len() - 1);
+    s[i]
+}
+
+/// Locks a mutex, recovering the data if a thread panicked while holding it.
+fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// One pipeline thread's entry among the heartbeats: it beats once per loop and retires when
+/// it finishes. A thread that panics never retires, so it soon counts as stuck.
+pub(crate) struct Heartbeat {
+    shared: Arc<Shared>,
+    id: usize,
+}
+
+impl Heartbeat {
+    pub(crate) fn beat(&self) {
+        let t = self.shared.elapsed_ns().max(1);
+        lock(&self.shared.heartbeats)[self.id].1 = t;
+    }
+
+    pub(crate) fn retire(self) {
+        lock(&self.shared.heartbeats)[self.id].1 = 0;
+    }
+
+    /// The status the thread reports to.
+    pub(crate) fn shared(&self) -> &Shared {
+        &self.shared
+    }
+}
+
+impl Shared {
+    pub(crate) fn new() -> Self {
+        let now = Instant::now();
+        Shared {
+            started: now,
+            stop: AtomicBool::new(false),
+            frames_in: AtomicU64::new(0),
+            frames_out: AtomicU64::new(0),
+            dropped: AtomicU64::new(0),
+            record_dropped: AtomicU64::new(0),
+            detector_errors: AtomicU64::new(0),
+            recorded_frames: AtomicU64::new(0),
+            source_state: Mutex::new(SourceState::Starting),
+            recording: Mutex::new("off".into()),
+            samples: Mutex::new(Samples::default()),
+            latest: Mutex::new(None),
+            heartbeats: Mutex::new(Vec::new()),
+            rates: Mutex::new(Rates {
+                at: now,
+                frames_in: 0,
+                frames_out: 0,
+                fps_in: 0.0,
+                fps_out: 0.0,
+            }),
+            source_error: Mutex::new(None),
+        }
+    }
+
+    /// Adds a thread to the heartbeats (it counts as alive from now on).
+    pub(crate) fn register(self: &Arc<Self>, name: &'static str) -> Heartbeat {
+        let mut h = lock(&self.heartbeats);
+        h.push((name, self.elapsed_ns().max(1)));
+        Heartbeat {
+            shared: self.clone(),
+            id: h.len() - 1,
+        }
+    }
+
+    fn elapsed_ns(&self) -> u64 {
+        self.started.elapsed().as_nanos() as u64
+    }
+
+    /// Asks the source to stop; the pipeline then drains and finishes.
+    pub fn request_stop(&self) {
+        self.stop.store(true, Ordering::SeqCst);
+    }
+
+    pub fn stop_requested(&self) -> bool {
+        self.stop.load(Ordering::SeqCst)
+    }
+
+    /// True while every pipeline thread that is still running loops (none is stuck; threads
+    /// that finished do not count).
+    pub fn alive(&self) -> bool {
+        let now = self.elapsed_ns();
+        let h = lock(&self.heartbeats);
+        !h.is_empty()
+            && h.iter()
+                .all(|&(_, t)| t == 0 || now.saturating_sub(t) < STUCK_AFTER.as_nanos() as u64)
+    }
+
+    /// The names of the threads that are stuck (for the log).
+    pub fn stuck_threads(&self) -> Vec<&'static str> {
+        let now = self.elapsed_ns();
+        lock(&self.heartbeats)
+            .iter()
+            .filter(|&&(_, t)| t != 0 && now.saturating_sub(t) >= STUCK_AFTER.as_nanos() as u64)
+            .map(|&(n, _)| n)
+            .collect()
+    }
+
+    pub fn frames_in(&self) -> u64 {
+        self.frames_in.load(Ordering::Relaxed)
+    }
+
+    pub fn source_state(&self) -> SourceState {
+        *lock(&self.source_state)
+    }
+
+    /// The error the source stopped with, if it failed.
+    pub fn source_error(&self) -> Option<String> {
+        lock(&self.source_error).clone()
+    }
+
+    pub fn latest(&self) -> Option<Latest> {
+        lock(&self.latest).clone()
+    }
+
+    /// The status summary now (frame rates over the last status interval).
+    pub fn status(&self) -> StatusSummary {
+        let (fps_in, fps_out) = {
+            let r = lock(&self.rates);
+            (r.fps_in, r.fps_out)
+        };
+        let s = lock(&self.samples);
+        StatusSummary {
+            uptime_s: self.started.elapsed().as_secs_f64(),
+            frames_in: self.frames_in.load(Ordering::Relaxed),
+            frames_out: self.frames_out.load(Ordering::Relaxed),
+            dropped: self.dropped.load(Ordering::Relaxed),
+            record_dropped: self.record_dropped.load(Ordering::Relaxed),
+            detector_errors: self.detector_errors.load(Ordering::Relaxed),
+            fps_in,
+            fps_out,
+            detector_p50_ms: percentile(&s.detector_ms, 0.5),
+            detector_p99_ms: percentile(&s.detector_ms, 0.99),
+            latency_p50_ms: percentile(&s.latency_ms, 0.5),
+            latency_p99_ms: percentile(&s.latency_ms, 0.99),
+            source_state: self.source_state(),
+            recording: lock(&self.recording).clone(),
+            recorded_frames: self.recorded_frames.load(Ordering::Relaxed),
+            status_counts: s.status_counts.clone(),
+        }
+    }
+
+    /// Frame rates in and out since the last call.
+    pub(crate) fn update_rates(&self) {
+        let mut r = lock(&self.rates);
+        let dt = r.at.elapsed().as_secs_f64();
+        if dt <= 0.0 {
+            return;
+        }
+        let fin = self.frames_in.load(Ordering::Relaxed);
+        let fout = self.frames_out.load(Ordering::Relaxed);
+        r.fps_in = (fin - r.frames_in) as f64 / dt;
+        r.fps_out = (fout - r.frames_out) as f64 / dt;
+        r.frames_in = fin;
+        r.frames_out = fout;
+        r.at = Instant::now();
+    }
+
+    // What the pipeline's threads report.
+
+    pub(crate) fn set_source_state(&self, state: SourceState) {
+        *lock(&self.source_state) = state;
+    }
+
+    /// The source thread finished: its state is `ended`, unless the camera was lost.
+    pub(crate) fn source_ended(&self) {
+        let mut st = lock(&self.source_state);
+        if *st != SourceState::Lost {
+            *st = SourceState::Ended;
+        }
+    }
+
+    pub(crate) fn set_source_error(&self, error: String) {
+        *lock(&self.source_error) = Some(error);
+    }
+
+    pub(crate) fn count_frame_in(&self) {
+        self.frames_in.fetch_add(1, Ordering::Relaxed);
+    }
+
+    pub(crate) fn count_dropped(&self, n: u64) {
+        self.dropped.fetch_add(n, Ordering::Relaxed);
+    }
+
+    pub(crate) fn count_record_dropped(&self, n: u64) {
+        self.record_dropped.fetch_add(n, Ordering::Relaxed);
+    }
+
+    pub(crate) fn count_detector_error(&self) {
+        self.detector_errors.fetch_add(1, Ordering::Relaxed);
+    }
+
+    /// An estimate of a frame was published: counts it and samples its timings.
+    pub(crate) fn count_published(&self, e: &Estimate) {
+        self.frames_out.fetch_add(1, Ordering::Relaxed);
+        let mut s = lock(&self.samples);
+        if s.detector_ms.len() == SAMPLE_WINDOW {
+            s.detector_ms.pop_front();
+            s.latency_ms.pop_front();
+        }
+        s.detector_ms.push_back(e.detector_ms);
+        s.latency_ms.push_back(e.latency_ms);
+        *s.status_counts
+            .entry(e.status.name().to_string())
+            .or_default() += 1;
+    }
+
+    /// An estimate without a frame (`camera_lost`) was published.
+    pub(crate) fn count_status(&self, status: Status) {
+        *lock(&self.samples)
+            .status_counts
+            .entry(status.name().to_string())
+            .or_default() += 1;
+    }
+
+    /// Makes `latest` the latest published frame; returns the one it replaces.
+    pub(crate) fn replace_latest(&self, latest: Latest) -> Option<Latest> {
+        lock(&self.latest).replace(latest)
+    }
+
+    pub(crate) fn set_recording(&self, state: String) {
+        *lock(&self.recording) = state;
+    }
+
+    pub(crate) fn set_recorded_frames(&self, n: u64) {
+        self.recorded_frames.store(n, Ordering::Relaxed);
+    }
+}

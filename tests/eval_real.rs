@@ -1,0 +1,246 @@
+//! `omnirow eval real` run as a binary: on synthetic fields rendered through a forward-looking
+//! pinhole camera with JSON labels from their ground truth (always), and on the real CRDLD
+//! images in ../shared/real-fields/crdld (skipped with a message when they are absent).
+
+use omnirow::camera::Calibration;
+use omnirow::eval::real::ProjectedRow;
+use omnirow::synth::{Renderer, Scene, Style, SynthOptions};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn omnirow(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_omnirow"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn outcomes(dir: &Path) -> Vec<serde_json::Value> {
+    std::fs::read_to_string(dir.join("outcomes.jsonl"))
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect()
+}
+
+/// A 512×512 pinhole camera, f = 300 px, looking 35° below the horizon.
+const PINHOLE: &str = "[pinhole]\nwidth = 512\nheight = 512\nfx = 300.0\nfy = 300.0\ncx = 255.5\ncy = 255.5\n\n[mounting]\npitch_deg = -55.0\n";
+
+/// Renders `n` colour fields through `calib` into DIR/image and writes their nearest rows'
+/// centre lines as JSON labels into DIR/label.
+fn synthetic_set(dir: &Path, calib: &Path, n: u64) {
+    let cal = Calibration::load(calib).unwrap();
+    std::fs::create_dir_all(dir.join("image")).unwrap();
+    std::fs::create_dir_all(dir.join("label")).unwrap();
+    let mut renderer = Renderer::new(&cal).unwrap();
+    for seed in 0..n {
+        let opts = SynthOptions {
+            style: Style::Colour,
+            yaw_deg: 4.0 * seed as f64 - 6.0,
+            lateral_m: 0.05 * seed as f64,
+            height_m: 1.0,
+            ..Default::default()
+        };
+        let scene = Scene::new(&opts, seed + 1, &cal.mounting).unwrap();
+        let mut data = vec![0u8; renderer.buffer_len(opts.style)];
+        renderer.render_into(&scene, &mut data).unwrap();
+        let (w, h) = renderer.size();
+        image::save_buffer(
+            dir.join(format!("image/{seed}.png")),
+            &data,
+            w,
+            h,
+            image::ExtendedColorType::Rgb8,
+        )
+        .unwrap();
+        let truth = omnirow::synth::GroundTruth::of_scene(&scene, &cal);
+        let rows: Vec<serde_json::Value> = truth
+            .row_normals
+            .iter()
+            .zip(&truth.row_lateral_m)
+            .filter(|(_, &lat)| lat.abs() < 1.2 * truth.row_spacing_m)
+            .map(|(n, _)| {
+                let p = ProjectedRow::project(&cal, &nalgebra::Vector3::from(*n));
+                // The lower half of the image, where rows are apart, every 8th scan line.
+                let xy: Vec<[f64; 2]> = p
+                    .crossings
+                    .iter()
+                    .filter(|c| c.0 >= 256 && c.0 % 8 == 0)
+                    .map(|c| [c.1, c.0 as f64])
+                    .collect();
+                serde_json::json!({ "xy": xy })
+            })
+            .collect();
+        std::fs::write(
+            dir.join(format!("label/{seed}.json")),
+            serde_json::json!({ "rows": rows }).to_string(),
+        )
+        .unwrap();
+    }
+}
+
+#[test]
+fn scores_synthetic_fields_through_a_pinhole() {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("eval_real_synth");
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let calib = dir.join("pinhole.toml");
+    std::fs::write(&calib, PINHOLE).unwrap();
+    synthetic_set(&dir, &calib, 3);
+    let out = dir.join("out");
+    let run = omnirow(&[
+        "eval",
+        "real",
+        "--images",
+        dir.join("image").to_str().unwrap(),
+        "--labels",
+        dir.join("label").to_str().unwrap(),
+        "--calib",
+        calib.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--worst",
+        "2",
+    ]);
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{stderr}");
+    let md = std::fs::read_to_string(out.join("README.md")).unwrap();
+    assert!(md.contains("| images | errors |"), "{md}");
+    assert_eq!(String::from_utf8_lossy(&run.stdout), md);
+    let o = outcomes(&out);
+    assert_eq!(o.len(), 3);
+    for v in &o {
+        assert!(v["error"].is_null(), "{v}");
+        let labelled = v["labelled_rows"].as_u64().unwrap();
+        assert!(labelled >= 2, "{v}");
+        // The detector finds the rows of a clean synthetic field.
+        assert!(v["matched_rows"].as_u64().unwrap() >= labelled - 1, "{v}");
+        assert!(v["score"].as_f64().unwrap() > 0.3, "{v}");
+        assert!(v["vp_error_px"].as_f64().unwrap() < 20.0, "{v}");
+    }
+    // The two worst images have overlays.
+    assert_eq!(std::fs::read_dir(out.join("overlays")).unwrap().count(), 2);
+}
+
+#[test]
+fn bad_labels_are_outcomes_with_errors_not_a_failed_run() {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("eval_real_bad");
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(dir.join("image")).unwrap();
+    std::fs::create_dir_all(dir.join("label")).unwrap();
+    let calib = dir.join("pinhole.toml");
+    std::fs::write(&calib, PINHOLE).unwrap();
+    let img = image::RgbImage::from_pixel(512, 512, image::Rgb([90, 70, 50]));
+    for n in 0..3 {
+        img.save(dir.join(format!("image/{n}.png"))).unwrap();
+    }
+    std::fs::write(dir.join("label/0.json"), r#"{"rows": [{"xy": [[1, 2]]}]}"#).unwrap();
+    std::fs::write(dir.join("label/1.png"), b"not a png").unwrap();
+    let out = dir.join("out");
+    let run = omnirow(&[
+        "eval",
+        "real",
+        "--images",
+        dir.join("image").to_str().unwrap(),
+        "--labels",
+        dir.join("label").to_str().unwrap(),
+        "--calib",
+        calib.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let o = outcomes(&out);
+    let err = |i: usize| o[i]["error"].as_str().unwrap_or_default().to_string();
+    assert!(
+        err(0).contains("0.json") && err(0).contains("rows[0]"),
+        "{}",
+        err(0)
+    );
+    assert!(err(1).contains("1.png"), "{}", err(1));
+    assert!(err(2).contains("no label"), "{}", err(2));
+    // A folder that does not exist stops the run with its name.
+    let run = omnirow(&[
+        "eval",
+        "real",
+        "--images",
+        "/nonexistent/images",
+        "--labels",
+        "/nonexistent/labels",
+        "--calib",
+        calib.to_str().unwrap(),
+    ]);
+    assert!(!run.status.success());
+    assert!(String::from_utf8_lossy(&run.stderr).contains("/nonexistent/images"));
+}
+
+/// The CRDLD test set beside the repository, if present.
+fn crdld() -> Option<PathBuf> {
+    let d = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/real-fields/crdld");
+    if d.join("image").is_dir() && d.join("label").is_dir() {
+        Some(d)
+    } else {
+        eprintln!(
+            "skipped: the CRDLD images are not at {} (see docs/real.md)",
+            d.display()
+        );
+        None
+    }
+}
+
+#[test]
+fn crdld_mask_labels_trace_into_rows() {
+    let Some(d) = crdld() else { return };
+    // Every label mask of the first 50 images gives rows, most of them several.
+    let mut rows = Vec::new();
+    for n in 0..50 {
+        let l = omnirow::eval::real::labels::load(
+            &d.join(format!("label/{n}.jpg")),
+            512,
+            512,
+            &Default::default(),
+        )
+        .unwrap();
+        rows.push(l.len());
+    }
+    assert!(rows.iter().all(|&n| n >= 1), "{rows:?}");
+    assert!(rows.iter().filter(|&&n| n >= 3).count() >= 40, "{rows:?}");
+}
+
+#[test]
+fn crdld_first_images_are_scored() {
+    let Some(d) = crdld() else { return };
+    let out = Path::new(env!("CARGO_TARGET_TMPDIR")).join("eval_real_crdld");
+    let _ = std::fs::remove_dir_all(&out);
+    let calib = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/calib/pinhole_512_f300.toml");
+    let run = omnirow(&[
+        "eval",
+        "real",
+        "--images",
+        d.join("image").to_str().unwrap(),
+        "--labels",
+        d.join("label").to_str().unwrap(),
+        "--calib",
+        calib.to_str().unwrap(),
+        "--limit",
+        "20",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let o = outcomes(&out);
+    assert_eq!(o.len(), 20);
+    // Every image has an answer or an error line, and its labels were read.
+    for v in &o {
+        assert!(v["error"].is_null(), "{v}");
+        assert!(v["labelled_rows"].as_u64().unwrap() >= 1, "{v}");
+    }
+}
