@@ -13,6 +13,7 @@ pub mod overlay;
 pub mod pencil;
 pub mod pose;
 pub mod refit;
+pub mod scale;
 pub mod smooth;
 pub mod threshold;
 pub mod vanishing;
