@@ -358,3 +358,50 @@ fn each_damaged_region_is_reported_once_with_the_frames_it_held() {
         assert_eq!(r.report().damage.len(), 1);
     }
 }
+
+/// Inputs the fuzzer found (tests/data/fuzz/): each replays to its end. The first was a
+/// duplicated chunk followed by damage: the scan for the next chunk went back to the
+/// duplicate, skipped it, met the damage again, and never ended.
+#[test]
+fn fuzzer_findings_replay_to_the_end() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/fuzz");
+    let mut n = 0;
+    for e in std::fs::read_dir(dir).unwrap() {
+        let path = e.unwrap().path();
+        let mut r = Salvage::new(std::io::Cursor::new(std::fs::read(&path).unwrap())).unwrap();
+        let mut events = 0;
+        while r.next_event().unwrap().is_some() {
+            events += 1;
+            assert!(events < 100_000, "{}: no end", path.display());
+        }
+        if let Ok(mut src) = McapReplay::open(McapReplayOptions {
+            path: path.clone(),
+            rate: Rate::Max,
+            looping: false,
+            topic: None,
+        }) {
+            for _ in 0..100_000 {
+                match src.poll(Duration::ZERO) {
+                    Ok(Poll::End) | Err(_) => break,
+                    _ => {}
+                }
+            }
+            assert_eq!(src.state(), omnirow::source::SourceState::Ended);
+        }
+        n += 1;
+    }
+    assert!(n >= 1);
+}
+
+#[test]
+fn a_duplicate_then_damage_without_a_summary_ends() {
+    let fx = fixture("dup-damage");
+    let (s, e, _) = fx.chunks[5];
+    let (s, e) = (s as usize, e as usize);
+    let data_end = mcap::read::footer(&fx.bytes).unwrap().summary_start as usize;
+    let mut bytes = fx.bytes[..e].to_vec();
+    bytes.extend_from_slice(&fx.bytes[s..e]);
+    bytes.extend_from_slice(&[0u8; 64]);
+    bytes.extend_from_slice(&fx.bytes[e..data_end]);
+    fx.check("a duplicate, then zeros, no summary", &bytes, &fx.all);
+}

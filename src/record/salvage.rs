@@ -181,6 +181,8 @@ pub struct Salvage<R: Read + Seek> {
     state: State,
     /// End of the last intact chunk: a scan for the next chunk starts here.
     trusted: u64,
+    /// The `trusted` offset a scan last started from.
+    rescanned_from: Option<u64>,
     /// Whether a chunk has been seen (then messages outside chunks are damage).
     chunked: bool,
     recent: [Option<ChunkKey>; RECENT_CHUNKS],
@@ -209,6 +211,7 @@ impl<R: Read + Seek> Salvage<R> {
             scan: Vec::new(),
             state: State::TopLevel,
             trusted: 8,
+            rescanned_from: None,
             chunked: false,
             recent: [None; RECENT_CHUNKS],
             recent_next: 0,
@@ -366,6 +369,7 @@ impl<R: Read + Seek> Salvage<R> {
                             "a chunk identical to one just read (a block written twice): skipped"
                         );
                         self.pos = at + FRAMING + len;
+                        self.trusted = self.pos;
                         return Ok(None);
                     }
                     self.close_open();
@@ -604,7 +608,14 @@ impl<R: Read + Seek> Salvage<R> {
                 return Ok((at + FRAMING + len, Some(BTreeMap::new())));
             }
         }
-        let from = self.trusted.min(at);
+        // From the end of the last intact chunk, in case a record that parsed had a damaged
+        // length and hid a chunk; but only once from there, so that reading always advances.
+        let from = if self.rescanned_from == Some(self.trusted) {
+            at
+        } else {
+            self.rescanned_from = Some(self.trusted);
+            self.trusted.min(at)
+        };
         let resume = self.scan_for_chunk(from, at)?;
         let resume = if resume == at { at + 1 } else { resume };
         Ok((resume.min(self.data_end), None))
