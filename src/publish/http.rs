@@ -13,6 +13,7 @@
 
 use super::live::{History, StatusDocument};
 use super::metrics::metrics;
+use crate::check::{Check, Raw};
 use crate::source::SourceState;
 use crate::status::{Latest, Shared};
 use bytes::Bytes;
@@ -26,6 +27,27 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::Duration;
 use tokio::sync::{oneshot, Semaphore};
+
+/// `[http]` of the node's configuration, as written.
+#[derive(Debug, Default, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawHttp {
+    enabled: Raw<bool>,
+    listen: Raw<String>,
+}
+
+impl RawHttp {
+    /// Checks `[http]`: the address to listen on, or None when the endpoint is disabled.
+    pub(crate) fn validate(self, c: &mut Check) -> Option<SocketAddr> {
+        if !c.get(&self.enabled, true) {
+            return None;
+        }
+        match &self.listen {
+            None => Some(SocketAddr::from(([127, 0, 0, 1], 8347))),
+            Some(s) => c.addr("http.listen", s),
+        }
+    }
+}
 
 /// Draws the overlay of the latest frame and encodes it as PNG.
 pub type OverlayFn = Arc<dyn Fn(&Latest) -> Result<Vec<u8>, String> + Send + Sync>;
@@ -266,6 +288,8 @@ impl Service {
             "pipeline_alive": alive,
             "source": state.name(),
             "frames_in": self.shared.frames_in(),
+            // Detection is what health means; the recording's state is said alongside.
+            "recording": self.shared.status().recording,
         });
         let code = if ok {
             StatusCode::OK

@@ -125,6 +125,14 @@ pub fn metrics(shared: &Shared) -> String {
         &plain(f64::from(u8::from(s.recording.starts_with("recording")))),
     );
     metric(
+        "omnirow_recording_failed",
+        "gauge",
+        "1 when the recording failed or stopped at the disk reserve (detection goes on).",
+        &plain(f64::from(u8::from(
+            s.recording.starts_with("failed") || s.recording.starts_with("stopped"),
+        ))),
+    );
+    metric(
         "omnirow_estimates_total",
         "counter",
         "Estimates published, by status.",
