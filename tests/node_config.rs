@@ -92,3 +92,42 @@ fn missing_file_is_an_error_naming_it() {
     assert!(!ok);
     assert!(err.contains("/nonexistent/omnirow.toml"), "{err}");
 }
+
+#[test]
+fn config_detector_shows_the_scales_of_a_calibration() {
+    let root = env!("CARGO_MANIFEST_DIR");
+    let scales = |file: &str| -> f64 {
+        let out = bin()
+            .args(["config", "detector", "--calib"])
+            .arg(format!("{root}/config/calib/{file}"))
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{out:?}");
+        let text = String::from_utf8(out.stdout).unwrap();
+        assert!(text.contains("[detector.hough]"), "{text}");
+        let line = text
+            .lines()
+            .find(|l| l.contains("hough cell along phi"))
+            .unwrap_or_else(|| panic!("{text}"));
+        let px: f64 = line
+            .split('=')
+            .nth(1)
+            .and_then(|t| t.trim().trim_end_matches("px").trim().parse().ok())
+            .unwrap_or_else(|| panic!("{line}"));
+        px
+    };
+    // The same 2° Hough cell spans more pixels through a lens with three times the focal
+    // length: three times at the centre, less over the whole image (the wide lens's
+    // off-centre pixels are smaller angles, which raises its median resolution).
+    let (a, b) = (
+        scales("pinhole_512_f300.toml"),
+        scales("pinhole_512_f900.toml"),
+    );
+    assert!(b / a > 2.2 && b / a < 3.05, "{a} px against {b} px");
+    let out = bin()
+        .args(["config", "detector", "--calib", "/nonexistent/calib.toml"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("/nonexistent/calib.toml"));
+}

@@ -15,7 +15,12 @@ pub enum ConfigCommand {
     Default,
     /// Print every detector option with its default value, as a `[detector]` section to
     /// paste into the configuration (or into an options file) and tune.
-    Detector,
+    Detector {
+        /// Also show, for this calibration, the angular resolution at the detector's working
+        /// resolution and each option's angle in pixels (and pixel length in degrees).
+        #[arg(long, value_name = "FILE")]
+        calib: Option<PathBuf>,
+    },
 }
 
 /// `omnirow config check|default`.
@@ -35,7 +40,13 @@ pub fn run(cmd: ConfigCommand) -> anyhow::Result<ExitCode> {
             print!("{}", include_str!("../../config/omnirow.toml"));
             Ok(ExitCode::SUCCESS)
         }
-        ConfigCommand::Detector => {
+        ConfigCommand::Detector { calib } => {
+            if let Some(path) = calib {
+                let cal = crate::camera::Calibration::load(&path)?;
+                let report = crate::detect::scale::scales_report(&cal, &Default::default())
+                    .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+                println!("# The detector's scales for {}:\n{report}", path.display());
+            }
             print!("{}", detector_defaults()?);
             Ok(ExitCode::SUCCESS)
         }

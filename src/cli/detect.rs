@@ -44,6 +44,7 @@ pub enum MethodArg {
     Hough,
     Edge,
     Combined,
+    Pencil,
 }
 
 impl From<MethodArg> for Method {
@@ -52,6 +53,7 @@ impl From<MethodArg> for Method {
             MethodArg::Hough => Method::Hough,
             MethodArg::Edge => Method::Edge,
             MethodArg::Combined => Method::Combined,
+            MethodArg::Pencil => Method::Pencil,
         }
     }
 }

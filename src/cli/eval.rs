@@ -103,7 +103,10 @@ pub fn run(a: EvalArgs) -> anyhow::Result<ExitCode> {
             "edge" => Ok(Method::Edge),
             "hough" => Ok(Method::Hough),
             "combined" => Ok(Method::Combined),
-            other => anyhow::bail!("--methods: unknown method '{other}' (edge, hough, combined)"),
+            "pencil" => Ok(Method::Pencil),
+            other => {
+                anyhow::bail!("--methods: unknown method '{other}' (edge, hough, combined, pencil)")
+            }
         })
         .collect::<anyhow::Result<_>>()?;
     let tty = std::io::stderr().is_terminal();

@@ -15,6 +15,7 @@ use super::combine::{consensus_score, pair_edge_rows, precision_fit, EDGE_PAIR_F
 use super::edge::{EdgeDetector, EdgeError, EdgeOptions, EdgeResult};
 use super::hough::{HoughOptions, HoughResult, HoughRows};
 use super::mask::{build_mask, find_fov, MaskOptions, MaskResult};
+use super::pencil::{Candidate, PencilOptions, PencilResult, PencilRows};
 use super::pose::heading_tilt;
 use super::refit::{refit_rows, RefitImage, RefitOptions, Tiles};
 use super::smooth::{Gaussian, SmoothOptions};
@@ -59,6 +60,7 @@ pub struct DetectorOptions {
     /// resolution (so by default it neither smooths again nor downsamples).
     pub edge: EdgeOptions,
     pub combined: CombinedOptions,
+    pub pencil: PencilOptions,
     pub vanishing: VanishingOptions,
 }
 
@@ -132,6 +134,7 @@ impl Default for DetectorOptions {
             refit: RefitOptions::default(),
             edge: EdgeOptions::default(),
             combined: CombinedOptions::default(),
+            pencil: PencilOptions::default(),
             vanishing: VanishingOptions::default(),
         }
     }
@@ -154,6 +157,9 @@ impl From<EdgeError> for DetectError {
 pub struct Points {
     pub rays: Vec<[f32; 3]>,
     pub weights: Vec<f32>,
+    /// The angular size (radians) of each point's pixel: the calibration's resolution where
+    /// the point is, from which the stages' pixel scales become angles.
+    pub pixel_rad: Vec<f32>,
 }
 
 /// What the preparation stage did.
@@ -417,12 +423,15 @@ impl Preparer {
         self.last_threshold = thr;
         points.rays.clear();
         points.weights.clear();
+        points.pixel_rad.clear();
+        let pixel_angle = s.pixel_angle as f32;
         for &i in &self.kept {
             points.rays.push(s.rays[i as usize]);
             let i = i as usize;
             points
                 .weights
                 .push(self.smoothed.data[i] as f32 * s.solid[i]);
+            points.pixel_rad.push(pixel_angle * s.solid[i].sqrt());
         }
         Ok(PrepareResult {
             threshold: thr,
@@ -564,6 +573,7 @@ pub struct Detector {
     opts: DetectorOptions,
     prep: Preparer,
     hough: HoughRows,
+    pencil: PencilRows,
     vanish: VanishingStage,
     points: Points,
     /// The edge method, set up for the working image size (built at the first image and
@@ -584,6 +594,10 @@ pub struct Detector {
     last_prepare: PrepareResult,
     last_hough: HoughResult,
     last_edge: EdgeResult,
+    last_pencil: PencilResult,
+    pencil_candidates: Vec<Candidate>,
+    pencil_rows: Vec<Row>,
+    pencil_bands: Vec<f64>,
 }
 
 impl Detector {
@@ -611,10 +625,12 @@ impl Detector {
         Ok(Detector {
             prep: Preparer::new(cal, &opts)?,
             hough: HoughRows::new(opts.hough)?,
+            pencil: PencilRows::new(opts.pencil, opts.max_tilt_deg, &cal.mounting)?,
             vanish: VanishingStage::new(cal, &opts)?,
             points: Points {
                 rays: Vec::with_capacity(opts.threshold.target_points + 1),
                 weights: Vec::with_capacity(opts.threshold.target_points + 1),
+                pixel_rad: Vec::with_capacity(opts.threshold.target_points + 1),
             },
             opts,
             edge: None,
@@ -632,6 +648,10 @@ impl Detector {
             last_prepare: PrepareResult::default(),
             last_hough: HoughResult::default(),
             last_edge: EdgeResult::default(),
+            last_pencil: PencilResult::default(),
+            pencil_candidates: Vec::with_capacity(16),
+            pencil_rows: Vec::with_capacity(64),
+            pencil_bands: Vec::with_capacity(64),
         })
     }
 
@@ -647,6 +667,18 @@ impl Detector {
         let t1 = Instant::now();
         out.rows.clear();
         self.last_hough = HoughResult::default();
+        self.last_pencil = PencilResult::default();
+        if method == Method::Pencil {
+            self.run_pencil(out)?;
+            let t2 = Instant::now();
+            self.times = StageTimes {
+                prepare: t1 - t0,
+                hough: t2 - t1,
+                edge: Duration::ZERO,
+                vanishing: Duration::ZERO,
+            };
+            return Ok(());
+        }
         if method != Method::Edge {
             self.last_hough =
                 self.hough
@@ -885,6 +917,87 @@ impl Detector {
         Ok(())
     }
 
+    /// The pencil method: the vanishing point that makes the rows sharpest and the rows
+    /// read off the profile there, then the vanishing stage on those rows.
+    ///
+    /// Each candidate vanishing point (the strongest local maxima of the profile's
+    /// contrast) gives its rows, each refitted freely on its points; the vanishing stage
+    /// then tells how well those rows still meet in one point. The candidate whose contrast
+    /// times that quality is highest wins: a wrong candidate that lines up one strong
+    /// structure sharply gives rows that do not agree once refitted.
+    fn run_pencil(&mut self, out: &mut Detection) -> Result<(), DetectError> {
+        let p = &self.points;
+        let scales = self.pencil.prepare(&p.rays, &p.weights, &p.pixel_rad)?;
+        self.pencil
+            .candidates(&p.rays, &p.weights, &[], &mut self.pencil_candidates);
+        let mut best: Option<(f64, usize)> = None;
+        for k in 0..self.pencil_candidates.len() {
+            let c = self.pencil_candidates[k];
+            out.rows.clear();
+            self.pencil
+                .read_rows(&c.direction, &p.rays, &p.weights, &mut out.rows);
+            let r = self.vanish.run(None, out)?;
+            let score = c.contrast * r.quality;
+            if best.map_or(true, |b| score > b.0) {
+                best = Some((score, k));
+                self.pencil_rows.clear();
+                self.pencil_rows.extend_from_slice(&out.rows);
+            }
+        }
+        out.rows.clear();
+        self.last_pencil = PencilResult {
+            scales,
+            evaluated: self.pencil.evaluated(),
+            ..PencilResult::default()
+        };
+        if let Some((_, k)) = best {
+            let c = self.pencil_candidates[k];
+            out.rows.extend_from_slice(&self.pencil_rows);
+            self.last_pencil.direction = Some(c.direction);
+            self.last_pencil.contrast = c.contrast;
+            self.last_pencil.rows = out.rows.len();
+        }
+        self.vanish.run(None, out)?;
+        if self.opts.pencil.polish {
+            self.polish_pencil_rows(out)?;
+        }
+        Ok(())
+    }
+
+    /// Refits the pencil's rows on the image's pixels near each (as the Hough rows are,
+    /// [`Preparer::refit`]), each in a wedge towards the vanishing point a quarter of the
+    /// angle to its nearest neighbour wide on each side, then finds the vanishing point
+    /// again and refits it by the rows' precision. The pencil places rows on a grid of
+    /// profile bins; the refit gives them the sub-pixel precision of the Hough method.
+    fn polish_pencil_rows(&mut self, out: &mut Detection) -> Result<(), DetectError> {
+        let Some(vp) = out.vanishing_point.map(|v| v.direction) else {
+            return Ok(());
+        };
+        let a = crate::sphere::any_perpendicular(&vp);
+        let b = vp.cross(&a);
+        let angle = |n: &Vector3<f64>| n.dot(&b).atan2(n.dot(&a)).rem_euclid(std::f64::consts::PI);
+        let max_band = self.opts.pencil.polish_max_band_deg.to_radians();
+        self.pencil_bands.clear();
+        for (i, r) in out.rows.iter().enumerate() {
+            let pi = angle(&r.normal);
+            let mut gap = std::f64::consts::PI;
+            for (j, q) in out.rows.iter().enumerate() {
+                if i != j {
+                    let d = (angle(&q.normal) - pi).rem_euclid(std::f64::consts::PI);
+                    gap = gap.min(d.min(std::f64::consts::PI - d));
+                }
+            }
+            self.pencil_bands.push((0.25 * gap).min(max_band));
+        }
+        self.prep
+            .refit(&mut out.rows, &self.pencil_bands, Some(&vp), false)?;
+        self.vanish.run(None, out)?;
+        if self.opts.refit.precision_weights {
+            self.refit_hough_by_precision(out);
+        }
+        Ok(())
+    }
+
     /// Runs the edge method on the preparer's smoothed vegetation image and mask.
     fn run_edge(&mut self) -> Result<(), DetectError> {
         let (_, smoothed) = self.prep.vegetation();
@@ -941,6 +1054,10 @@ impl Detector {
 
     pub fn last_prepare(&self) -> PrepareResult {
         self.last_prepare
+    }
+
+    pub fn last_pencil(&self) -> PencilResult {
+        self.last_pencil
     }
 
     pub fn last_hough(&self) -> HoughResult {

@@ -10,8 +10,10 @@ pub mod edge;
 pub mod hough;
 pub mod mask;
 pub mod overlay;
+pub mod pencil;
 pub mod pose;
 pub mod refit;
+pub mod scale;
 pub mod smooth;
 pub mod threshold;
 pub mod vanishing;
@@ -48,6 +50,7 @@ impl Method {
             Method::Hough => "hough",
             Method::Edge => "edge",
             Method::Combined => "combined",
+            Method::Pencil => "pencil",
         }
     }
 }
@@ -81,6 +84,9 @@ pub enum Method {
     Hough,
     Edge,
     Combined,
+    /// Rows as the peaks of the vegetation across the pencil of great circles through the
+    /// vanishing point that makes them sharpest ([`pencil`]).
+    Pencil,
 }
 
 /// A row: the great circle where its plane cuts the unit sphere.

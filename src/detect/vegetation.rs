@@ -25,6 +25,13 @@ pub enum VegetationIndex {
     ExcessGreen,
     /// Brightness (R + 2G + B) / 4: for colour images whose plants are simply bright.
     Luma,
+    /// Excess green of the chromatic coordinates, 2g − r − b with r = R / (R + G + B) etc.
+    /// (Woebbecke et al. 1995), scaled so that 1 is 255: independent of the illumination's
+    /// brightness, so a plant in a shadow is as green as one in the sun.
+    ChromaticExcessGreen,
+    /// Excess green minus excess red of the chromatic coordinates, (2g − r − b) − (1.4r − g)
+    /// (Meyer & Neto 2008), scaled so that 1 is 255: also rejects reddish soil and straw.
+    ExcessGreenMinusRed,
 }
 
 /// Options of the vegetation step.
@@ -79,6 +86,26 @@ fn exg(r: i32, g2: i32, b: i32) -> u8 {
     ((g2 - r - b).max(0) >> 1).min(255) as u8
 }
 
+/// Added to R + G + B before dividing: near-black pixels (noise, deep shadow) have no
+/// reliable chromaticity and must not become vegetation.
+const CHROMA_DARK: i32 = 24;
+
+#[inline]
+fn chroma_exg(r: i32, g2: i32, b: i32) -> u8 {
+    // 255 (2G − R − B) / (R + G + B + k), from g2 = 2G.
+    let num = 255 * (g2 - r - b).max(0);
+    let den = 2 * (r + b) + g2 + 2 * CHROMA_DARK;
+    ((2 * num / den).min(255)) as u8
+}
+
+#[inline]
+fn exg_exr(r: i32, g2: i32, b: i32) -> u8 {
+    // 255 (3G − 2.4R − B) / (R + G + B + k) = 255 (15 g2 − 24 r − 10 b) / (10 (2R + g2 + 2B + 2k)).
+    let num = 255 * (15 * g2 - 24 * r - 10 * b).max(0);
+    let den = 10 * (2 * (r + b) + g2 + 2 * CHROMA_DARK);
+    ((2 * num / den).min(255)) as u8
+}
+
 #[inline]
 fn luma(r: i32, g2: i32, b: i32) -> u8 {
     ((r + g2 + b + 2) >> 2).min(255) as u8
@@ -131,10 +158,7 @@ pub fn vegetation_image(
         VegetationIndex::Auto => VegetationIndex::ExcessGreen,
         other => other,
     };
-    let f = |r: i32, g2: i32, b: i32| match index {
-        VegetationIndex::Luma => luma(r, g2, b),
-        _ => exg(r, g2, b),
-    };
+    let f = index_fn(index);
     match (view.format, factor) {
         (PixelFormat::Mono8, 1) => out.data.copy_from_slice(d),
         (PixelFormat::Mono8, _) => {
@@ -192,9 +216,15 @@ pub fn vegetation_image(
             // a row's fitted centre line by a fraction of a pixel that does not average out.
             // Red and blue are interpolated (bilinearly, from the four nearest samples of
             // each, clamped at the borders) to the quad's centre.
+            // One instance per index, so that each inner loop inlines its index.
+            let o = &mut out.data;
             match index {
-                VegetationIndex::Luma => bayer_centred(d, w, oh, &mut out.data, luma),
-                _ => bayer_centred(d, w, oh, &mut out.data, exg),
+                VegetationIndex::Luma => bayer_centred(d, w, oh, o, luma),
+                VegetationIndex::ChromaticExcessGreen => bayer_centred(d, w, oh, o, chroma_exg),
+                VegetationIndex::ExcessGreenMinusRed => bayer_centred(d, w, oh, o, exg_exr),
+                VegetationIndex::Auto | VegetationIndex::ExcessGreen => {
+                    bayer_centred(d, w, oh, o, exg)
+                }
             }
         }
     }
@@ -203,6 +233,16 @@ pub fn vegetation_image(
         width: ow,
         height: oh,
     })
+}
+
+/// The per-pixel function of a resolved index (R, 2G, B → byte).
+fn index_fn(index: VegetationIndex) -> fn(i32, i32, i32) -> u8 {
+    match index {
+        VegetationIndex::Luma => luma,
+        VegetationIndex::ChromaticExcessGreen => chroma_exg,
+        VegetationIndex::ExcessGreenMinusRed => exg_exr,
+        VegetationIndex::Auto | VegetationIndex::ExcessGreen => exg,
+    }
 }
 
 /// The vegetation index `f` of each quad of a Bayer RGGB image (`w` wide, `oh` quad rows)
@@ -293,6 +333,36 @@ mod tests {
         let r = vegetation_image(&view, &VegetationOptions::default(), false, &mut out).unwrap();
         assert_eq!((r.factor, r.width, r.height), (1, 4, 1));
         assert_eq!(out.data, vec![165, 0, 0, 0]);
+    }
+
+    #[test]
+    fn chromatic_indices_do_not_depend_on_brightness() {
+        // A plant in the sun and the same plant at a third of the light; reddish soil.
+        let data = [60, 180, 45, 20, 60, 15, 150, 110, 80];
+        let view = ImageView::new(3, 1, PixelFormat::Rgb8, &data).unwrap();
+        let mut out = GreyImage::default();
+        for index in [
+            VegetationIndex::ChromaticExcessGreen,
+            VegetationIndex::ExcessGreenMinusRed,
+        ] {
+            vegetation_image(&view, &VegetationOptions { index }, false, &mut out).unwrap();
+            let (sun, shade) = (out.data[0] as i32, out.data[1] as i32);
+            assert!(
+                sun > 60 && (sun - shade).abs() * 5 < sun,
+                "{index:?}: {:?}",
+                out.data
+            );
+            assert_eq!(out.data[2], 0, "{index:?}: soil");
+        }
+        // Plain excess green loses two thirds of the shaded plant.
+        vegetation_image(&view, &VegetationOptions::default(), false, &mut out).unwrap();
+        assert!(out.data[1] * 2 < out.data[0], "{:?}", out.data);
+        // Black stays black.
+        let black = [0u8, 0, 0];
+        let view = ImageView::new(1, 1, PixelFormat::Rgb8, &black).unwrap();
+        let index = VegetationIndex::ChromaticExcessGreen;
+        vegetation_image(&view, &VegetationOptions { index }, false, &mut out).unwrap();
+        assert_eq!(out.data, vec![0]);
     }
 
     #[test]
