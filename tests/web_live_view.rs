@@ -3,8 +3,6 @@
 //! page shows are those of `/status` and that the frame and the plot render. The node runs the
 //! synthetic drive standing still, so every estimate is the same and the page and `/status`
 //! can be compared whenever each was read.
-//!
-//! `OMNIROW_LIVE_VIEW_PNG=PATH` keeps the screenshot (docs/live-view.png is made this way).
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -184,8 +182,5 @@ fn live_view_shows_the_status_numbers_frame_and_plot() {
         coloured > 20_000,
         "only {coloured} coloured pixels in the frame's area"
     );
-    if let Some(keep) = std::env::var_os("OMNIROW_LIVE_VIEW_PNG") {
-        std::fs::copy(&shot, keep).unwrap();
-    }
     node.stop();
 }

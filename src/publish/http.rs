@@ -9,7 +9,8 @@
 //! [`HttpOptions::header_timeout`] and in at most [`HttpOptions::max_header_bytes`], a
 //! connection lives at most [`HttpOptions::connection_lifetime`], and at most
 //! [`HttpOptions::max_connections`] are open at once (beyond that new ones are closed at
-//! once). The service reads the node's [`crate::status`]; it never slows the pipeline down.
+//! once). The service reads the node's [`crate::status`]; its threads run at nice 10, so
+//! that serving and drawing use only the CPU time the pipeline leaves over.
 
 use super::live::{History, StatusDocument};
 use super::metrics::metrics;
@@ -123,6 +124,7 @@ impl HttpServer {
             .enable_time()
             .max_blocking_threads(1)
             .thread_name("http-render")
+            .on_thread_start(lower_priority)
             .build()
             .map_err(HttpError::Runtime)?;
         let bind = |source| HttpError::Bind { addr, source };
@@ -138,6 +140,7 @@ impl HttpServer {
         let thread = std::thread::Builder::new()
             .name("http".into())
             .spawn(move || {
+                lower_priority();
                 runtime.block_on(accept_loop(listener, service, options, stopped));
                 // Connections still open are dropped; an overlay being drawn may finish.
                 runtime.shutdown_timeout(Duration::from_secs(2));
@@ -173,6 +176,24 @@ impl HttpServer {
 impl Drop for HttpServer {
     fn drop(&mut self) {
         self.shutdown();
+    }
+}
+
+/// Niceness of the service's threads: overlays are drawn (and requests answered) only with
+/// CPU time the pipeline leaves over.
+const NICE: libc::c_int = 10;
+
+/// Lowers the calling thread's scheduling priority to [`NICE`] (Linux nices threads one by
+/// one). A failure is logged: the service still works, only less politely.
+fn lower_priority() {
+    // SAFETY: setpriority reads its three integer arguments only; `who` 0 is the calling
+    // thread on Linux.
+    let rc = unsafe { libc::setpriority(libc::PRIO_PROCESS, 0, NICE) };
+    if rc != 0 {
+        tracing::debug!(
+            "HTTP: could not lower the thread's priority: {}",
+            std::io::Error::last_os_error()
+        );
     }
 }
 
