@@ -9,6 +9,7 @@ mod config;
 pub mod detect;
 mod eval;
 mod eval_real;
+mod recording;
 mod run;
 mod synth;
 
@@ -49,6 +50,9 @@ pub enum Command {
     },
     /// List the GigE Vision / USB3 Vision cameras Aravis finds (needs the `camera` feature).
     Cameras(cameras::CamerasArgs),
+    /// Check MCAP recordings for damage, or repair one (docs/recording.md).
+    #[command(subcommand)]
+    Recording(recording::RecordingCommand),
 }
 
 /// Parses the process arguments and runs the command.
@@ -67,20 +71,12 @@ pub fn main() -> anyhow::Result<ExitCode> {
         Command::Run(a) => run::run(*a, None),
         Command::Record { out, args } => run::run(*args, Some(out)),
         Command::Cameras(a) => cameras::run(a),
+        Command::Recording(c) => recording::run(c),
     }
 }
 
-/// Logs through tracing to stderr; `RUST_LOG` filters, `OMNIROW_LOG_FORMAT=json` selects JSON.
+/// Logs through tracing to stderr at level info; `RUST_LOG` filters, `OMNIROW_LOG_FORMAT=json`
+/// selects JSON (the node takes both from its configuration instead).
 pub fn init_logging() {
-    use tracing_subscriber::EnvFilter;
-    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"));
-    let json = std::env::var("OMNIROW_LOG_FORMAT").is_ok_and(|v| v == "json");
-    let builder = tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_writer(std::io::stderr);
-    let _ = if json {
-        builder.json().try_init()
-    } else {
-        builder.try_init()
-    };
+    crate::logging::init(crate::logging::LogFormat::Human, "info");
 }

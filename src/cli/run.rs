@@ -9,20 +9,20 @@
 //! exit at once; the main loop polls the flag every 20 ms.
 
 use crate::camera::{Calibration, IdealLens};
-use crate::config::{CalibrationChoice, Config, LogFormat, SourceConfig, StdoutMode};
+use crate::config::Config;
 use crate::detect::{Detection, Detector};
 use crate::frame::ImageView;
 use crate::notify::Notifier;
 use crate::pipeline::{Pipeline, Processor};
 use crate::publish::http::{HttpServer, OverlayFn};
-use crate::publish::stdout::StdoutPublisher;
+use crate::publish::stdout::{StdoutMode, StdoutPublisher};
 use crate::publish::udp::{UdpOptions, UdpPublisher};
 use crate::publish::Publisher;
 use crate::record::Recorder;
 use crate::source::folder::{FolderOptions, FolderReplay};
 use crate::source::mcap_replay::{McapReplay, McapReplayOptions};
 use crate::source::synthetic::SyntheticDrive;
-use crate::source::{Rate, Source, SourceState};
+use crate::source::{CalibrationChoice, Rate, ReplayConfig, Source, SourceConfig, SourceState};
 use crate::status::Latest;
 use anyhow::{bail, Context};
 use clap::Args;
@@ -100,7 +100,7 @@ fn configure(args: &RunArgs) -> anyhow::Result<Config> {
             SourceConfig::Replay(r) => (r.rate, r.looping, r.topic.clone(), r.fps),
             _ => (Rate::Recorded(1.0), false, None, 15.0),
         };
-        cfg.source = SourceConfig::Replay(crate::config::ReplayConfig {
+        cfg.source = SourceConfig::Replay(ReplayConfig {
             path: path.clone(),
             rate,
             looping,
@@ -165,22 +165,6 @@ fn configure(args: &RunArgs) -> anyhow::Result<Config> {
     Ok(cfg)
 }
 
-fn init_logging(cfg: &Config) {
-    use tracing_subscriber::EnvFilter;
-    let filter =
-        EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new(&cfg.log_level));
-    let json = cfg.log_format == LogFormat::Json
-        || std::env::var("OMNIROW_LOG_FORMAT").is_ok_and(|v| v == "json");
-    let builder = tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_writer(std::io::stderr);
-    let _ = if json {
-        builder.json().try_init()
-    } else {
-        builder.try_init()
-    };
-}
-
 /// The GigE Vision camera of `[gige]` (`[source] kind = "camera"`).
 #[cfg(feature = "camera")]
 fn camera_source(g: &crate::gige::GigeConfig) -> anyhow::Result<Box<dyn Source>> {
@@ -219,7 +203,7 @@ pub fn run(args: RunArgs, record_to: Option<PathBuf>) -> anyhow::Result<ExitCode
         rec.frame_id = cfg.frame_id.clone();
         cfg.record = Some(rec);
     }
-    init_logging(&cfg);
+    crate::logging::init(cfg.log_format, &cfg.log_level);
 
     // Source (opened now, so a missing file is an error before anything starts).
     let source: Box<dyn Source> = match &cfg.source {
@@ -301,10 +285,15 @@ pub fn run(args: RunArgs, record_to: Option<PathBuf>) -> anyhow::Result<ExitCode
         publishers.push(p);
     }
 
-    let recorder = match &cfg.record {
-        Some(r) => Some(Recorder::new(r.clone())?),
-        None => None,
-    };
+    // A recording that cannot start does not stop detection: the node runs, says so on
+    // /healthz and /metrics, and exits non-zero at the end.
+    let recorder = cfg.record.as_ref().map(|r| {
+        Recorder::new(r.clone()).unwrap_or_else(|e| {
+            tracing::error!("recording not started: {e}; detection goes on");
+            Recorder::failed(r.clone(), e.to_string())
+        })
+    });
+    let record_health = recorder.as_ref().map(Recorder::health);
 
     // Signals before threads start, so none is missed.
     let term = Arc::new(AtomicBool::new(false));
@@ -421,6 +410,12 @@ pub fn run(args: RunArgs, record_to: Option<PathBuf>) -> anyhow::Result<ExitCode
     }
     if st.source_state == SourceState::Lost && !stopping {
         bail!("the camera was lost");
+    }
+    if let Some(why) = record_health.and_then(|h| h.failure()) {
+        bail!(
+            "the recording {why}; {} frames recorded",
+            st.recorded_frames
+        );
     }
     Ok(ExitCode::SUCCESS)
 }
