@@ -227,3 +227,44 @@ fn eval_scores_a_configurations_detector() {
         "{err}"
     );
 }
+
+#[test]
+fn eval_leafy_reports_table1_on_the_second_appearance() {
+    let out = Path::new(env!("CARGO_TARGET_TMPDIR")).join("eval_cli_leafy");
+    let _ = std::fs::remove_dir_all(&out);
+    omnirow_ok(&[
+        "eval",
+        "--quick",
+        "--images",
+        "2",
+        "--distance-images",
+        "0",
+        "--table2-images",
+        "0",
+        "--methods",
+        "hough",
+        "--leafy",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let lines = outcomes(&out);
+    let leafy: Vec<_> = lines
+        .iter()
+        .filter(|o| o["experiment"] == "table1leafy")
+        .collect();
+    assert_eq!((lines.len(), leafy.len()), (4, 2));
+    // The same scenes (seeds) as Table I's.
+    let seeds = |e: &str| -> Vec<u64> {
+        lines
+            .iter()
+            .filter(|o| o["experiment"] == e)
+            .map(|o| o["seed"].as_u64().unwrap())
+            .collect()
+    };
+    assert_eq!(seeds("table1"), seeds("table1leafy"));
+    let md = std::fs::read_to_string(out.join("README.md")).unwrap();
+    assert!(
+        md.contains("### Table I on the second appearance model"),
+        "{md}"
+    );
+}

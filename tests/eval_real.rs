@@ -15,6 +15,26 @@ fn omnirow(args: &[&str]) -> Output {
         .unwrap()
 }
 
+/// Runs `omnirow eval real` on `dir`/image and `dir`/label with `calib`, writing into `out`,
+/// with `extra` arguments.
+fn eval_real(dir: &Path, calib: &Path, out: &Path, extra: &[&str]) -> Output {
+    let (images, labels) = (dir.join("image"), dir.join("label"));
+    let mut args = vec![
+        "eval",
+        "real",
+        "--images",
+        images.to_str().unwrap(),
+        "--labels",
+        labels.to_str().unwrap(),
+        "--calib",
+        calib.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    omnirow(&args)
+}
+
 fn outcomes(dir: &Path) -> Vec<serde_json::Value> {
     std::fs::read_to_string(dir.join("outcomes.jsonl"))
         .unwrap()
@@ -88,20 +108,7 @@ fn scores_synthetic_fields_through_a_pinhole() {
     std::fs::write(&calib, PINHOLE).unwrap();
     synthetic_set(&dir, &calib, 3);
     let out = dir.join("out");
-    let run = omnirow(&[
-        "eval",
-        "real",
-        "--images",
-        dir.join("image").to_str().unwrap(),
-        "--labels",
-        dir.join("label").to_str().unwrap(),
-        "--calib",
-        calib.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-        "--worst",
-        "2",
-    ]);
+    let run = eval_real(&dir, &calib, &out, &["--worst", "2"]);
     let stderr = String::from_utf8_lossy(&run.stderr);
     assert!(run.status.success(), "{stderr}");
     let md = std::fs::read_to_string(out.join("README.md")).unwrap();
@@ -137,18 +144,7 @@ fn bad_labels_are_outcomes_with_errors_not_a_failed_run() {
     std::fs::write(dir.join("label/0.json"), r#"{"rows": [{"xy": [[1, 2]]}]}"#).unwrap();
     std::fs::write(dir.join("label/1.png"), b"not a png").unwrap();
     let out = dir.join("out");
-    let run = omnirow(&[
-        "eval",
-        "real",
-        "--images",
-        dir.join("image").to_str().unwrap(),
-        "--labels",
-        dir.join("label").to_str().unwrap(),
-        "--calib",
-        calib.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let run = eval_real(&dir, &calib, &out, &[]);
     assert!(
         run.status.success(),
         "{}",
@@ -217,20 +213,7 @@ fn crdld_first_images_are_scored() {
     let out = Path::new(env!("CARGO_TARGET_TMPDIR")).join("eval_real_crdld");
     let _ = std::fs::remove_dir_all(&out);
     let calib = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/calib/pinhole_512_f300.toml");
-    let run = omnirow(&[
-        "eval",
-        "real",
-        "--images",
-        d.join("image").to_str().unwrap(),
-        "--labels",
-        d.join("label").to_str().unwrap(),
-        "--calib",
-        calib.to_str().unwrap(),
-        "--limit",
-        "20",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let run = eval_real(&d, &calib, &out, &["--limit", "20"]);
     assert!(
         run.status.success(),
         "{}",

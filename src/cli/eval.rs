@@ -23,6 +23,10 @@ pub struct EvalArgs {
     /// Images for Table I (default 100; 8 with --quick).
     #[arg(long)]
     pub images: Option<usize>,
+    /// Also draw Table I's scenes with the second appearance model (`synth --style leafy`)
+    /// and report Table I on it.
+    #[arg(long)]
+    pub leafy: bool,
     /// Images per lens for Table II (default 100; 6 with --quick).
     #[arg(long)]
     pub table2_images: Option<usize>,
@@ -80,6 +84,7 @@ pub fn run(a: EvalArgs) -> anyhow::Result<ExitCode> {
         EvalOptions::full(lenses)
     };
     opts.seed = a.seed;
+    opts.table1_leafy = a.leafy;
     if let Some(p) = &a.config {
         opts.detector = crate::config::Config::load(p)?.detector;
     }

@@ -91,6 +91,8 @@ pub enum StyleArg {
     Grey,
     Colour,
     Bayer,
+    /// The second appearance model: leaf clusters, uneven light, blur, Bayer, JPEG.
+    Leafy,
 }
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
@@ -163,6 +165,7 @@ pub fn run(args: SynthArgs) -> anyhow::Result<ExitCode> {
             StyleArg::Grey => Style::Grey,
             StyleArg::Colour => Style::Colour,
             StyleArg::Bayer => Style::Bayer,
+            StyleArg::Leafy => Style::Leafy,
         };
     }
 
@@ -178,7 +181,7 @@ pub fn run(args: SynthArgs) -> anyhow::Result<ExitCode> {
     let truth = crate::synth::GroundTruth::of_scene(&scene, &cal);
     let (w, h) = renderer.size();
     let colour = match opts.style {
-        Style::Colour => image::ExtendedColorType::Rgb8,
+        Style::Colour | Style::Leafy => image::ExtendedColorType::Rgb8,
         Style::Grey | Style::Bayer => image::ExtendedColorType::L8,
     };
     image::save_buffer_with_format(&args.out, &data, w, h, colour, image::ImageFormat::Png)

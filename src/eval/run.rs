@@ -8,7 +8,7 @@ use crate::detect::{DetectError, Detection, Method};
 use crate::frame::ImageView;
 use crate::sphere::axis_angle;
 use crate::synth::{
-    random_scene, GroundTruth, Protocol, Renderer, Scene, SynthError, SynthOptions,
+    random_scene, GroundTruth, Protocol, Renderer, Scene, Style, SynthError, SynthOptions,
 };
 use nalgebra::Vector3;
 use std::time::Instant;
@@ -58,6 +58,8 @@ impl Lens {
 pub struct EvalOptions {
     /// Images for Table I (alternating over the lenses).
     pub table1_images: usize,
+    /// Table I's scenes again through the second appearance model (`Style::Leafy`).
+    pub table1_leafy: bool,
     /// Images per lens for Table II.
     pub table2_images: usize,
     /// Images per lens and plant distance for figures 8 and 9.
@@ -85,6 +87,7 @@ impl EvalOptions {
     pub fn full(lenses: Vec<Lens>) -> Self {
         EvalOptions {
             table1_images: 100,
+            table1_leafy: false,
             table2_images: 100,
             distance_images: 10,
             plant_distances: vec![0.03, 0.05, 0.1, 0.15, 0.2, 0.3, 0.4],
@@ -138,6 +141,8 @@ pub struct Outcome {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Experiment {
     Table1,
+    /// Table I's scenes drawn by the second appearance model (`Style::Leafy`).
+    Table1Leafy,
     Distance,
     Table2,
 }
@@ -239,6 +244,19 @@ pub fn run(
             Experiment::Table1,
             i % nl,
             random_scene(seed, Protocol::Table1),
+            seed,
+        ));
+    }
+    // The same scenes through the second appearance model.
+    for i in 0..opts.table1_images * opts.table1_leafy as usize {
+        let (_, l, scene, seed) = plan[i].clone();
+        plan.push((
+            Experiment::Table1Leafy,
+            l,
+            SynthOptions {
+                style: Style::Leafy,
+                ..scene
+            },
             seed,
         ));
     }
@@ -356,7 +374,12 @@ impl EvalResults {
 
     /// Table I for a method.
     pub fn accuracy(&self, method: Method) -> AccuracyRow {
-        let all: Vec<&Outcome> = self.select(Experiment::Table1, method).collect();
+        self.accuracy_in(Experiment::Table1, method)
+    }
+
+    /// Table I's figures for one method on the images of `experiment`.
+    pub fn accuracy_in(&self, experiment: Experiment, method: Method) -> AccuracyRow {
+        let all: Vec<&Outcome> = self.select(experiment, method).collect();
         let errs: Vec<f64> = all
             .iter()
             .filter(|o| self.passes(o))

@@ -324,6 +324,42 @@ impl Field {
         (o[0] as f64, o[1] as f64)
     }
 
+    /// Whether any plant's stem may lie within `reach` metres of (x, y) along each axis
+    /// (the window [`plants_near`](Self::plants_near) would visit is not empty).
+    pub fn any_plant_near(&self, x: f64, y: f64, reach: f64) -> bool {
+        let (lo, hi) = self.window(x, y, reach);
+        lo[0] <= hi[0] && lo[1] <= hi[1]
+    }
+
+    /// The (row, plant) index window of [`plants_near`](Self::plants_near): lowest, highest.
+    fn window(&self, x: f64, y: f64, reach: f64) -> ([i64; 2], [i64; 2]) {
+        let (ex, ey) = (
+            self.window_x - self.shape.reach(),
+            self.window_y - self.shape.reach(),
+        );
+        (
+            [
+                ceil_i((y - reach - ey) * self.inv_spacing).max(self.row_min),
+                ceil_i((x - reach - ex) * self.inv_distance).max(self.k_min),
+            ],
+            [
+                floor_i((y + reach + ey) * self.inv_spacing).min(self.row_max),
+                floor_i((x + reach + ex) * self.inv_distance).min(self.k_max),
+            ],
+        )
+    }
+
+    /// Calls `f(row, k, stem)` for every plant whose stem (position error included) may lie
+    /// within `reach` metres of (x, y) along each axis: another renderer's leaf reach.
+    pub fn plants_near(&self, x: f64, y: f64, reach: f64, mut f: impl FnMut(i64, i64, [f64; 2])) {
+        let (lo, hi) = self.window(x, y, reach);
+        for i in lo[0]..=hi[0] {
+            for k in lo[1]..=hi[1] {
+                f(i, k, self.plant_position(i, k));
+            }
+        }
+    }
+
     /// True when no plant or weed reaches into the ground rectangle [x0, x1] × [y0, y1].
     /// (Conservative: may say false for a bare rectangle, never true for a covered one.)
     #[inline]

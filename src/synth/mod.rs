@@ -2,11 +2,13 @@
 //!
 //! Owns the paper's section III-B reproduced and extended: the field model (rows, plants with
 //! four leaves, weeds), the camera pose over it, the renderer (supersampled, greyscale or
-//! colour or Bayer), the three kinds of noise, and the ground truth of every image.
+//! colour or Bayer), the three kinds of noise, and the ground truth of every image; and a
+//! second, independently designed appearance (`leafy`, in `appearance`) for the same scenes.
 //!
 //! Typical use: [`render`] for one image, or a [`Renderer`] built once per calibration and a
 //! [`Scene`] per image for many. Everything follows from [`SynthOptions`] and a `u64` seed.
 
+mod appearance;
 mod bayer;
 mod field;
 mod noise;

@@ -17,6 +17,9 @@ pub enum Style {
     Colour,
     /// The colour image as the GC2450C delivers it raw: an RGGB Bayer mosaic (BayerRggb8).
     Bayer,
+    /// The second, independently designed appearance (src/synth/appearance.rs): leaf-cluster
+    /// plants, supersampled, uneven light, lens blur, Bayer mosaic demosaiced, JPEG (Rgb8).
+    Leafy,
 }
 
 impl Style {
@@ -25,7 +28,7 @@ impl Style {
         use crate::frame::PixelFormat;
         match self {
             Style::Grey => PixelFormat::Mono8,
-            Style::Colour => PixelFormat::Rgb8,
+            Style::Colour | Style::Leafy => PixelFormat::Rgb8,
             Style::Bayer => PixelFormat::BayerRggb8,
         }
     }

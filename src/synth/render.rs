@@ -175,6 +175,17 @@ impl Renderer {
             });
         }
         let (w, h) = (self.geo.width, self.geo.height);
+        if style == Style::Leafy {
+            let g = &self.geo;
+            return super::appearance::render_leafy(
+                scene,
+                &g.corners,
+                &g.inside,
+                (w, h),
+                self.threads,
+                out,
+            );
+        }
         let channels = if style == Style::Grey { 1 } else { 3 };
         let target: &mut [u8] = if style == Style::Bayer {
             self.rgb.resize(w * h * 3, 0);
