@@ -1,8 +1,7 @@
 #!/usr/bin/env bash
 # Runs every fuzz target in fuzz/ (coverage-guided, libFuzzer through cargo-fuzz) for a bounded
 # time each, seeded from real files: the configurations and calibrations in config/, MCAP
-# recordings made here with `omnirow record`, small images made with `omnirow synth`, HTTP
-# requests. Fails when a target crashes, with the crashing input saved under
+# recordings made here with `omnirow record`, small images made with `omnirow synth`. Fails when a target crashes, with the crashing input saved under
 # fuzz/artifacts/TARGET/ and printed in base64 (a CI log keeps it).
 #
 #   scripts/fuzz.sh [SECONDS_EACH] [TARGET...]     (default: 45 s each, every target)
@@ -44,11 +43,6 @@ seed_dir() { [ -d "$seeds/$1" ] && echo "$seeds/$1"; }
 if d=$(seed_dir calibration_toml); then cp config/calib/*.toml config/calibration.example.toml "$d"/; fi
 if d=$(seed_dir ocamcalib_parse); then cp config/calib/ocamcalib/*.txt "$d"/; fi
 if d=$(seed_dir node_config); then cp config/omnirow.toml "$d"/; fi
-if d=$(seed_dir http_request); then
-  printf 'GET /healthz HTTP/1.1\r\nHost: localhost\r\n\r\n' >"$d/healthz"
-  printf 'HEAD /metrics?x=1 HTTP/1.0\r\nAccept: */*\r\nUser-Agent: curl\r\n\r\n' >"$d/metrics"
-  printf 'POST /status HTTP/1.1\nContent-Length: 3\n\nabc' >"$d/post"
-fi
 if d=$(seed_dir mcap_replay); then
   cfg="$seeds/node.toml"
   printf '[source.synthetic]\nwidth = 48\nheight = 40\nfps = 30.0\nseed = 3\n\n[http]\nenabled = false\n' >"$cfg"
