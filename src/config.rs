@@ -9,6 +9,7 @@
 use crate::camera::IdealLens;
 use crate::detect::DetectorOptions;
 use crate::gige::GigeConfig;
+use crate::guidance::{GuidanceConfig, GuidanceOptions};
 use crate::pipeline::PipelineOptions;
 use crate::record::RecordOptions;
 use crate::ros2::Ros2Config;
@@ -149,6 +150,8 @@ pub struct Config {
     pub detector: DetectorOptions,
     /// ROS 2 publishing (`[ros2]`, docs/ros2.md); off unless `enabled = true`.
     pub ros2: Ros2Config,
+    /// Row guidance (`[guidance]`, docs/guidance.md); `None` with `enabled = false`.
+    pub guidance: Option<GuidanceOptions>,
 }
 
 impl Default for Config {
@@ -175,6 +178,7 @@ struct RawConfig {
     detector: Option<DetectorOptions>,
     gige: Option<GigeConfig>,
     ros2: Option<Ros2Config>,
+    guidance: Option<GuidanceConfig>,
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -559,6 +563,19 @@ fn validate(raw: RawConfig, c: &mut Check) -> Config {
         });
     }
 
+    let guidance = match raw.guidance.clone().unwrap_or_default().options() {
+        Ok(g) => g,
+        Err(message) => {
+            let key = message.split(' ').next().unwrap_or_default();
+            c.problems.push(Problem {
+                line: header_line(c.text, "guidance"),
+                key: format!("guidance.{key}"),
+                message,
+            });
+            None
+        }
+    };
+
     let calibration = match &cam.calibration {
         None => CalibrationChoice::Auto,
         Some(s) => match s.get_ref().as_str() {
@@ -733,6 +750,7 @@ fn validate(raw: RawConfig, c: &mut Check) -> Config {
         log_level,
         detector,
         ros2,
+        guidance,
     }
 }
 
@@ -836,6 +854,24 @@ mod tests {
         // Without [gige], the camera's defaults (first camera found, BayerRG8).
         let cfg = Config::parse("[source]\nkind = \"camera\"\n", "t.toml").unwrap();
         assert_eq!(cfg.source, SourceConfig::Camera(GigeConfig::default()));
+    }
+
+    #[test]
+    fn guidance_section() {
+        assert!(Config::default().guidance.is_some());
+        let cfg = Config::parse(
+            "[guidance]\nmode = \"over_row\"\nrow_spacing_m = 0.75\n",
+            "t.toml",
+        )
+        .unwrap();
+        assert_eq!(cfg.guidance.unwrap().row_spacing_m, Some(0.75));
+        let e = err("[log]\nlevel = \"info\"\n[guidance]\nmin_rows = 1\n");
+        assert_eq!(e.problems[0].key, "guidance.min_rows");
+        assert_eq!(e.problems[0].line, 3);
+        assert!(Config::parse("[guidance]\nenabled = false\n", "t.toml")
+            .unwrap()
+            .guidance
+            .is_none());
     }
 
     #[test]

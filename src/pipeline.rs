@@ -20,6 +20,7 @@ use crate::detect::Detection;
 use crate::estimate::{Estimate, Status};
 use crate::frame::{now_ns, Frame, ImageView};
 use crate::gige::Recycler;
+use crate::guidance::Guidance;
 use crate::publish::Publisher;
 use crate::record::{RecordState, Recorder};
 use crate::source::{Poll, Source, SourceState};
@@ -59,6 +60,8 @@ pub struct PipelineOptions {
     pub status_interval: Duration,
     /// How long the source waits for a frame before it checks for stop (and reports its state).
     pub poll_timeout: Duration,
+    /// Row guidance, run by the publisher on each estimate in frame order.
+    pub guidance: Option<Guidance>,
 }
 
 impl Default for PipelineOptions {
@@ -72,6 +75,7 @@ impl Default for PipelineOptions {
             max_duration: None,
             status_interval: Duration::from_secs(1),
             poll_timeout: Duration::from_millis(50),
+            guidance: None,
         }
     }
 }
@@ -404,6 +408,7 @@ impl Pipeline {
             let release = release.clone();
             let hb = sh.register("publisher");
             let status_interval = opts.status_interval;
+            let mut guidance = opts.guidance.clone();
             let max_waiting = opts.estimate_queue + 2 * n_workers + 2;
             threads.push((
                 "publisher",
@@ -440,6 +445,9 @@ impl Pipeline {
                                     mut estimate,
                                     ..
                                 } = d;
+                                if let Some(g) = guidance.as_mut() {
+                                    estimate.apply_guidance(g);
+                                }
                                 estimate.stamp_published(now_ns());
                                 last_seq = estimate.seq;
                                 for p in publishers.iter_mut() {

@@ -97,7 +97,11 @@ impl Mounting {
                 self.height_m
             ));
         }
-        if let Some(v) = self.position_m.iter().find(|v| !v.is_finite() || v.abs() > 50.0) {
+        if let Some(v) = self
+            .position_m
+            .iter()
+            .find(|v| !v.is_finite() || v.abs() > 50.0)
+        {
             return Err(format!(
                 "position_m = {:?}: {v} is not a position in metres within ±50 of base_link",
                 self.position_m
