@@ -217,6 +217,7 @@ struct RawSynthetic {
     pitch_amplitude_deg: S<f64>,
     offset_amplitude_m: S<f64>,
     period_s: S<f64>,
+    cross_at_s: S<f64>,
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -494,6 +495,13 @@ fn validate(raw: RawConfig, c: &mut Check) -> Config {
                     5.0,
                 ),
                 period_s: c.range("source.synthetic.period_s", &syn.period_s, 20.0, 0.1, 1e6),
+                cross_at_s: c.range(
+                    "source.synthetic.cross_at_s",
+                    &syn.cross_at_s,
+                    0.0,
+                    0.0,
+                    1e6,
+                ),
                 render_threads: 0,
             })
         }

@@ -11,6 +11,10 @@
 //! has its own bounded channel with the same drop-oldest policy, so a slow disk never stalls
 //! detection.
 //!
+//! Each thread is a function given the state it owns and the channels it uses —
+//! `run_source`, `run_worker`, `run_publisher`, `run_recorder` — and
+//! [`Pipeline::start`] wires them together; they report to the node's [`crate::status`].
+//!
 //! Memory bound: at most `frame_queue + workers + workers (reorder buffer) + 1 (latest, for
 //! the overlay) + record_queue + 2 (being recorded, being read by the source)` frames are
 //! alive at once, whatever the input rate — for the GC2450C (5 MB a frame) with the defaults
@@ -24,7 +28,7 @@ use crate::guidance::Guidance;
 use crate::publish::Publisher;
 use crate::record::{RecordState, Recorder};
 use crate::source::{Poll, Source, SourceState};
-use crate::status::{Latest, Shared, StatusSummary};
+use crate::status::{Heartbeat, Latest, Shared, StatusSummary};
 use crossbeam_channel::{bounded, Receiver, RecvTimeoutError, Sender, TrySendError};
 use std::collections::BTreeMap;
 use std::sync::{Arc, Mutex};
@@ -143,7 +147,7 @@ impl Release {
 }
 
 /// Sends `item`, waiting while the channel is full (for sources that are not real-time).
-/// Gives up and counts the item as dropped only when `stop` is set while waiting.
+/// Gives up and counts the item as dropped only when a stop is requested while waiting.
 fn send_waiting<T>(tx: &Sender<T>, mut item: T, shared: &Shared) -> u64 {
     loop {
         match tx.send_timeout(item, Duration::from_millis(50)) {
@@ -159,11 +163,47 @@ fn send_waiting<T>(tx: &Sender<T>, mut item: T, shared: &Shared) -> u64 {
     }
 }
 
+/// A bounded channel's two ends, kept together so that a sender can make room by taking out
+/// the oldest queued item (the real-time policy).
+struct Queue<T> {
+    tx: Sender<T>,
+    rx: Receiver<T>,
+}
+
+impl<T> Clone for Queue<T> {
+    fn clone(&self) -> Self {
+        Queue {
+            tx: self.tx.clone(),
+            rx: self.rx.clone(),
+        }
+    }
+}
+
+impl<T> Queue<T> {
+    fn bounded(capacity: usize) -> Self {
+        let (tx, rx) = bounded(capacity);
+        Queue { tx, rx }
+    }
+
+    /// Sends `item` from a source: a real-time one drops the oldest queued items (handed to
+    /// `on_drop`) while the queue is full, any other waits for room. Returns how many items
+    /// were dropped.
+    fn send(&self, item: T, realtime: bool, shared: &Shared, on_drop: impl FnMut(T)) -> u64 {
+        if realtime {
+            send_drop_oldest_with(&self.tx, &self.rx, item, on_drop)
+        } else {
+            send_waiting(&self.tx, item, shared)
+        }
+    }
+}
+
+/// What the recorder writes: frames from the source thread, estimates from the publisher.
 enum RecordItem {
     Frame(Arc<Frame>),
     Estimate(Box<Estimate>),
 }
 
+/// A frame's detection and estimate, from a worker to the publisher.
 struct Done {
     ticket: u64,
     frame: Arc<Frame>,
@@ -179,340 +219,67 @@ pub struct Pipeline {
 
 impl Pipeline {
     /// Starts the threads. `processors` are the detector workers (one thread each).
+    ///
+    /// Frames flow source → frame queue → workers → estimate queue → publisher (in frame
+    /// order) → publishers; the recorder takes frames from the source and estimates from the
+    /// publisher through a queue of its own.
     pub fn start(
-        mut source: Box<dyn Source>,
+        source: Box<dyn Source>,
         processors: Vec<Box<dyn Processor>>,
-        mut publishers: Vec<Box<dyn Publisher>>,
+        publishers: Vec<Box<dyn Publisher>>,
         recorder: Option<Recorder>,
         opts: PipelineOptions,
     ) -> Result<Pipeline, PipelineError> {
-        if processors.is_empty() {
-            return Err(PipelineError::NoWorkers);
-        }
-        if opts.frame_queue == 0 || opts.estimate_queue == 0 || opts.record_queue == 0 {
-            return Err(PipelineError::Capacity(
-                opts.frame_queue,
-                opts.estimate_queue,
-                opts.record_queue,
-            ));
-        }
+        check(&processors, &opts)?;
         let shared = Arc::new(Shared::new());
         let release = Release(source.recycler());
-        let mut threads = Vec::new();
-        let (frame_tx, frame_rx) = bounded::<Arc<Frame>>(opts.frame_queue);
+        let mut threads = Threads::new(&shared);
+        let frames = Queue::<Arc<Frame>>::bounded(opts.frame_queue);
         let (done_tx, done_rx) = bounded::<Done>(opts.estimate_queue);
-        let (rec_tx, rec_rx) = bounded::<RecordItem>(opts.record_queue);
-        let recording = recorder.is_some();
-        let spawn = |name: &'static str, f: Box<dyn FnOnce() + Send>| {
-            std::thread::Builder::new()
-                .name(name.into())
-                .spawn(f)
-                .map_err(|e| PipelineError::Thread(name, e))
+
+        // Recorder: frames from the source, estimates from the publisher, on a queue of its own.
+        let record = match recorder {
+            Some(rec) => {
+                let queue = Queue::bounded(opts.record_queue);
+                shared.set_recording(record_state_text(rec.state()));
+                let (items, release) = (queue.rx.clone(), release.clone());
+                threads.spawn("recorder", move |hb| run_recorder(hb, rec, items, release))?;
+                Some(queue)
+            }
+            None => None,
         };
 
-        // Recorder.
-        if let Some(mut rec) = recorder {
-            let sh = shared.clone();
-            let rx = rec_rx.clone();
-            let release = release.clone();
-            let hb = sh.register("recorder");
-            sh.set_recording(record_state_text(rec.state()));
-            threads.push((
-                "recorder",
-                spawn(
-                    "recorder",
-                    Box::new(move || {
-                        loop {
-                            hb.beat();
-                            let item = match rx.recv_timeout(Duration::from_millis(200)) {
-                                Ok(i) => i,
-                                Err(RecvTimeoutError::Timeout) => continue,
-                                Err(RecvTimeoutError::Disconnected) => break,
-                            };
-                            let r = match &item {
-                                RecordItem::Frame(f) => rec.write_frame(f),
-                                RecordItem::Estimate(e) => rec.write_estimate(e),
-                            };
-                            if let Err(e) = r {
-                                tracing::error!("recording stopped: {e}; detection goes on");
-                                rec.fail(e.to_string());
-                            }
-                            release.record_item(item);
-                            sh.set_recorded_frames(rec.frames_written());
-                            sh.set_recording(record_state_text(rec.state()));
-                        }
-                        if let Err(e) = rec.finish() {
-                            tracing::error!("closing the recording: {e}");
-                        }
-                        sh.set_recording(record_state_text(rec.state()));
-                        hb.retire();
-                    }),
-                )?,
-            ));
-        }
+        // Source → frame queue.
+        tracing::info!("source: {}", source.describe());
+        let intake = Arc::new(Mutex::new(Intake::new(frames.rx.clone())));
+        let (limits, to_record, rel) = (opts.clone(), record.clone(), release.clone());
+        threads.spawn("source", move |hb| {
+            run_source(hb, source, &limits, frames, to_record, rel)
+        })?;
 
-        // Source.
-        {
-            let sh = shared.clone();
-            let (tx, rx) = (frame_tx, frame_rx.clone());
-            let (rtx, rrx) = (rec_tx.clone(), rec_rx.clone());
-            let opts = opts.clone();
-            let release = release.clone();
-            let hb = sh.register("source");
-            tracing::info!("source: {}", source.describe());
-            threads.push((
-                "source",
-                spawn(
-                    "source",
-                    Box::new(move || {
-                        let t0 = Instant::now();
-                        let mut n = 0u64;
-                        let realtime = source.realtime();
-                        loop {
-                            hb.beat();
-                            if sh.stop_requested()
-                                || opts.max_frames.is_some_and(|m| n >= m)
-                                || opts.max_duration.is_some_and(|d| t0.elapsed() >= d)
-                            {
-                                break;
-                            }
-                            let polled = source.poll(opts.poll_timeout);
-                            sh.set_source_state(source.state());
-                            match polled {
-                                Ok(Poll::Frame(mut f)) => {
-                                    // A camera stamps the buffer's arrival itself.
-                                    if f.receive_ns == 0 {
-                                        f.receive_ns = now_ns();
-                                    }
-                                    n += 1;
-                                    sh.count_frame_in();
-                                    let f = Arc::new(f);
-                                    if recording {
-                                        let item = RecordItem::Frame(f.clone());
-                                        let d = if realtime {
-                                            send_drop_oldest_with(&rtx, &rrx, item, |i| {
-                                                release.record_item(i)
-                                            })
-                                        } else {
-                                            send_waiting(&rtx, item, &sh)
-                                        };
-                                        sh.count_record_dropped(d);
-                                    }
-                                    let d = if realtime {
-                                        send_drop_oldest_with(&tx, &rx, f, |f| release.frame(f))
-                                    } else {
-                                        send_waiting(&tx, f, &sh)
-                                    };
-                                    if d > 0 {
-                                        sh.count_dropped(d);
-                                        tracing::debug!(
-                                            dropped = d,
-                                            "frame queue full: oldest dropped"
-                                        );
-                                    }
-                                }
-                                Ok(Poll::Idle) => {}
-                                Ok(Poll::End) => {
-                                    tracing::info!(frames = n, "source ended");
-                                    break;
-                                }
-                                Err(e) => {
-                                    tracing::error!("source failed: {e}");
-                                    sh.set_source_error(e.to_string());
-                                    break;
-                                }
-                            }
-                        }
-                        sh.source_ended();
-                        hb.retire();
-                    }),
-                )?,
-            ));
-        }
-        // Detector workers: take a frame and its ticket under one lock, so tickets follow the
-        // order frames leave the queue.
-        let intake = Arc::new(Mutex::new((frame_rx, 0u64)));
-        let n_workers = processors.len();
-        for (i, mut proc) in processors.into_iter().enumerate() {
+        // Frame queue → detector workers (a ticket per frame) → estimate queue.
+        let workers = processors.len();
+        for (i, proc) in processors.into_iter().enumerate() {
             let name: &'static str = WORKER_NAMES.get(i).copied().unwrap_or("detector");
-            let sh = shared.clone();
-            let intake = intake.clone();
-            let tx = done_tx.clone();
-            let min_quality = opts.min_quality;
-            let hb = sh.register(name);
-            threads.push((
-                name,
-                spawn(
-                    name,
-                    Box::new(move || {
-                        let mut det = Detection::default();
-                        loop {
-                            hb.beat();
-                            let got = {
-                                let mut g = intake.lock().unwrap_or_else(|e| e.into_inner());
-                                match g.0.recv_timeout(Duration::from_millis(100)) {
-                                    Ok(f) => {
-                                        let t = g.1;
-                                        g.1 += 1;
-                                        Ok((t, f))
-                                    }
-                                    Err(e) => Err(e),
-                                }
-                            };
-                            let (ticket, frame) = match got {
-                                Ok(x) => x,
-                                Err(RecvTimeoutError::Timeout) => continue,
-                                Err(RecvTimeoutError::Disconnected) => break,
-                            };
-                            hb.beat();
-                            let t = Instant::now();
-                            let result = match frame.view() {
-                                Ok(view) => proc.process(&view, &mut det),
-                                Err(e) => Err(e.into()),
-                            };
-                            let ms = t.elapsed().as_secs_f64() * 1e3;
-                            let estimate = match result {
-                                Ok(()) => Estimate::from_detection(&frame, &det, ms, min_quality),
-                                Err(e) => {
-                                    sh.count_detector_error();
-                                    tracing::warn!(seq = frame.seq, "detector: {e}");
-                                    det = Detection::default();
-                                    let mut est = Estimate::empty(&frame, Status::Error);
-                                    est.detector_ms = ms;
-                                    est.error = Some(e.to_string());
-                                    est
-                                }
-                            };
-                            let done = Done {
-                                ticket,
-                                frame,
-                                detection: det.clone(),
-                                estimate,
-                            };
-                            if tx.send(done).is_err() {
-                                break;
-                            }
-                        }
-                        hb.retire();
-                    }),
-                )?,
-            ));
+            let (intake, done, min_quality) = (intake.clone(), done_tx.clone(), opts.min_quality);
+            threads.spawn(name, move |hb| {
+                run_worker(hb, proc, &intake, done, min_quality)
+            })?;
         }
         drop(done_tx);
 
-        // Publisher: in-order release, publishing, status, camera-lost heartbeats.
-        {
-            let sh = shared.clone();
-            let rtx = rec_tx;
-            let rrx = rec_rx;
-            let release = release.clone();
-            let hb = sh.register("publisher");
-            let status_interval = opts.status_interval;
-            let mut guidance = opts.guidance.clone();
-            let max_waiting = opts.estimate_queue + 2 * n_workers + 2;
-            threads.push((
-                "publisher",
-                spawn(
-                    "publisher",
-                    Box::new(move || {
-                        let mut next_ticket = 0u64;
-                        let mut waiting: BTreeMap<u64, Done> = BTreeMap::new();
-                        let mut last_status = Instant::now();
-                        let mut last_lost: Option<Instant> = None;
-                        let mut last_seq = 0u64;
-                        let mut disconnected = false;
-                        while !disconnected || !waiting.is_empty() {
-                            hb.beat();
-                            match done_rx.recv_timeout(Duration::from_millis(100)) {
-                                Ok(d) => {
-                                    waiting.insert(d.ticket, d);
-                                }
-                                Err(RecvTimeoutError::Timeout) => {}
-                                Err(RecvTimeoutError::Disconnected) => disconnected = true,
-                            }
-                            // A ticket that can never come back (a worker died mid-frame, or
-                            // all workers are gone): release what is waiting, in order.
-                            if disconnected || waiting.len() > max_waiting {
-                                if let Some(&t) = waiting.keys().next() {
-                                    next_ticket = next_ticket.max(t);
-                                }
-                            }
-                            while let Some(d) = waiting.remove(&next_ticket) {
-                                next_ticket += 1;
-                                let Done {
-                                    frame,
-                                    detection,
-                                    mut estimate,
-                                    ..
-                                } = d;
-                                if let Some(g) = guidance.as_mut() {
-                                    estimate.apply_guidance(g);
-                                }
-                                estimate.stamp_published(now_ns());
-                                last_seq = estimate.seq;
-                                for p in publishers.iter_mut() {
-                                    if let Err(e) = p.publish(&estimate, Some(&frame)) {
-                                        tracing::debug!(publisher = p.name(), "publish: {e}");
-                                    }
-                                }
-                                sh.count_published(&estimate);
-                                if recording {
-                                    let d = send_drop_oldest(
-                                        &rtx,
-                                        &rrx,
-                                        RecordItem::Estimate(Box::new(estimate.clone())),
-                                    );
-                                    sh.count_record_dropped(d);
-                                }
-                                let previous = sh.replace_latest(Latest {
-                                    frame,
-                                    detection,
-                                    estimate,
-                                });
-                                if let Some(p) = previous {
-                                    release.frame(p.frame);
-                                }
-                            }
-                            if sh.source_state() == SourceState::Lost
-                                && last_lost.map_or(true, |t| t.elapsed() >= Duration::from_secs(1))
-                            {
-                                last_lost = Some(Instant::now());
-                                let e = Estimate::camera_lost(last_seq, now_ns());
-                                for p in publishers.iter_mut() {
-                                    let _ = p.publish(&e, None);
-                                }
-                                sh.count_status(e.status);
-                            }
-                            if last_status.elapsed() >= status_interval {
-                                last_status = Instant::now();
-                                sh.update_rates();
-                                let st = sh.status();
-                                tracing::info!(
-                                    frames_in = st.frames_in,
-                                    frames_out = st.frames_out,
-                                    dropped = st.dropped,
-                                    fps = format_args!("{:.1}", st.fps_out),
-                                    detector_p50_ms = format_args!("{:.1}", st.detector_p50_ms),
-                                    detector_p99_ms = format_args!("{:.1}", st.detector_p99_ms),
-                                    latency_p99_ms = format_args!("{:.1}", st.latency_p99_ms),
-                                    source = st.source_state.name(),
-                                    recording = %st.recording,
-                                    "status"
-                                );
-                                for p in publishers.iter_mut() {
-                                    p.status(&st);
-                                }
-                            }
-                        }
-                        for p in publishers.iter_mut() {
-                            p.finish();
-                        }
-                        hb.retire();
-                    }),
-                )?,
-            ));
-        }
-        Ok(Pipeline { shared, threads })
+        // Estimate queue → publisher, in ticket order → publishers, recorder, latest frame.
+        let order = Reorder::new(opts.estimate_queue + 2 * workers + 2);
+        let mut out = Outlet::new(publishers, record, release);
+        out.guidance = opts.guidance.clone();
+        let status_interval = opts.status_interval;
+        threads.spawn("publisher", move |hb| {
+            run_publisher(hb, done_rx, order, out, status_interval)
+        })?;
+        Ok(Pipeline {
+            shared,
+            threads: threads.handles,
+        })
     }
 
     /// The shared state, for monitors (HTTP, systemd notify).
@@ -552,6 +319,54 @@ impl Pipeline {
     }
 }
 
+/// The options the pipeline cannot start with.
+fn check(processors: &[Box<dyn Processor>], opts: &PipelineOptions) -> Result<(), PipelineError> {
+    if processors.is_empty() {
+        return Err(PipelineError::NoWorkers);
+    }
+    if opts.frame_queue == 0 || opts.estimate_queue == 0 || opts.record_queue == 0 {
+        return Err(PipelineError::Capacity(
+            opts.frame_queue,
+            opts.estimate_queue,
+            opts.record_queue,
+        ));
+    }
+    Ok(())
+}
+
+/// The pipeline's threads, each among the heartbeats from before it starts until its loop
+/// returns.
+struct Threads {
+    shared: Arc<Shared>,
+    handles: Vec<(&'static str, JoinHandle<()>)>,
+}
+
+impl Threads {
+    fn new(shared: &Arc<Shared>) -> Self {
+        Threads {
+            shared: shared.clone(),
+            handles: Vec::new(),
+        }
+    }
+
+    fn spawn(
+        &mut self,
+        name: &'static str,
+        run: impl FnOnce(&Heartbeat) + Send + 'static,
+    ) -> Result<(), PipelineError> {
+        let hb = self.shared.register(name);
+        let handle = std::thread::Builder::new()
+            .name(name.into())
+            .spawn(move || {
+                run(&hb);
+                hb.retire();
+            })
+            .map_err(|e| PipelineError::Thread(name, e))?;
+        self.handles.push((name, handle));
+        Ok(())
+    }
+}
+
 const WORKER_NAMES: [&str; 8] = [
     "detector-0",
     "detector-1",
@@ -563,12 +378,378 @@ const WORKER_NAMES: [&str; 8] = [
     "detector-7",
 ];
 
+/// The recorder thread: writes what it is given until the source and the publisher are gone,
+/// then closes the recording. A write error stops the recording, never detection.
+fn run_recorder(hb: &Heartbeat, mut rec: Recorder, items: Receiver<RecordItem>, release: Release) {
+    let sh = hb.shared();
+    loop {
+        hb.beat();
+        let item = match items.recv_timeout(Duration::from_millis(200)) {
+            Ok(i) => i,
+            Err(RecvTimeoutError::Timeout) => continue,
+            Err(RecvTimeoutError::Disconnected) => break,
+        };
+        let r = match &item {
+            RecordItem::Frame(f) => rec.write_frame(f),
+            RecordItem::Estimate(e) => rec.write_estimate(e),
+        };
+        if let Err(e) = r {
+            tracing::error!("recording stopped: {e}; detection goes on");
+            rec.fail(e.to_string());
+        }
+        release.record_item(item);
+        sh.set_recorded_frames(rec.frames_written());
+        sh.set_recording(record_state_text(rec.state()));
+    }
+    if let Err(e) = rec.finish() {
+        tracing::error!("closing the recording: {e}");
+    }
+    sh.set_recording(record_state_text(rec.state()));
+}
+
 fn record_state_text(s: &RecordState) -> String {
     match s {
         RecordState::Recording(p) => format!("recording {}", p.display()),
         RecordState::StoppedDiskFull => "stopped: disk reserve reached".into(),
         RecordState::Failed(e) => format!("failed: {e}"),
         RecordState::Closed => "closed".into(),
+    }
+}
+
+/// The source thread: polls the source until it ends or fails, a limit of `opts` is reached
+/// or a stop is requested, and queues every frame for the workers and the recorder.
+fn run_source(
+    hb: &Heartbeat,
+    mut source: Box<dyn Source>,
+    opts: &PipelineOptions,
+    frames: Queue<Arc<Frame>>,
+    record: Option<Queue<RecordItem>>,
+    release: Release,
+) {
+    let sh = hb.shared();
+    let t0 = Instant::now();
+    let mut n = 0u64;
+    let realtime = source.realtime();
+    loop {
+        hb.beat();
+        if sh.stop_requested()
+            || opts.max_frames.is_some_and(|m| n >= m)
+            || opts.max_duration.is_some_and(|d| t0.elapsed() >= d)
+        {
+            break;
+        }
+        let polled = source.poll(opts.poll_timeout);
+        sh.set_source_state(source.state());
+        match polled {
+            Ok(Poll::Frame(f)) => {
+                n += 1;
+                queue_frame(sh, f, realtime, &frames, record.as_ref(), &release);
+            }
+            Ok(Poll::Idle) => {}
+            Ok(Poll::End) => {
+                tracing::info!(frames = n, "source ended");
+                break;
+            }
+            Err(e) => {
+                tracing::error!("source failed: {e}");
+                sh.set_source_error(e.to_string());
+                break;
+            }
+        }
+    }
+    sh.source_ended();
+}
+
+/// Stamps a new frame's arrival, counts it, and queues it for the recorder and the workers
+/// (a real-time source's oldest queued frames are dropped when the queues are full).
+fn queue_frame(
+    sh: &Shared,
+    mut f: Frame,
+    realtime: bool,
+    frames: &Queue<Arc<Frame>>,
+    record: Option<&Queue<RecordItem>>,
+    release: &Release,
+) {
+    // A camera stamps the buffer's arrival itself.
+    if f.receive_ns == 0 {
+        f.receive_ns = now_ns();
+    }
+    sh.count_frame_in();
+    let f = Arc::new(f);
+    if let Some(record) = record {
+        let item = RecordItem::Frame(f.clone());
+        let d = record.send(item, realtime, sh, |i| release.record_item(i));
+        sh.count_record_dropped(d);
+    }
+    let d = frames.send(f, realtime, sh, |f| release.frame(f));
+    if d > 0 {
+        sh.count_dropped(d);
+        tracing::debug!(dropped = d, "frame queue full: oldest dropped");
+    }
+}
+
+/// The frame queue's receiving end with the next ticket. Workers take a frame and its ticket
+/// under one lock, so tickets follow the order frames leave the queue.
+struct Intake {
+    frames: Receiver<Arc<Frame>>,
+    next_ticket: u64,
+}
+
+impl Intake {
+    fn new(frames: Receiver<Arc<Frame>>) -> Self {
+        Intake {
+            frames,
+            next_ticket: 0,
+        }
+    }
+
+    /// The next frame and its ticket, waiting at most `timeout`.
+    fn take(
+        intake: &Mutex<Intake>,
+        timeout: Duration,
+    ) -> Result<(u64, Arc<Frame>), RecvTimeoutError> {
+        let mut g = intake.lock().unwrap_or_else(|e| e.into_inner());
+        let frame = g.frames.recv_timeout(timeout)?;
+        let ticket = g.next_ticket;
+        g.next_ticket += 1;
+        Ok((ticket, frame))
+    }
+}
+
+/// A detector worker thread: runs `proc` on frame after frame and sends each estimate to the
+/// publisher, until the frame queue is closed (the source is done) and empty.
+fn run_worker(
+    hb: &Heartbeat,
+    mut proc: Box<dyn Processor>,
+    intake: &Mutex<Intake>,
+    done: Sender<Done>,
+    min_quality: f64,
+) {
+    let mut det = Detection::default();
+    loop {
+        hb.beat();
+        let (ticket, frame) = match Intake::take(intake, Duration::from_millis(100)) {
+            Ok(x) => x,
+            Err(RecvTimeoutError::Timeout) => continue,
+            Err(RecvTimeoutError::Disconnected) => break,
+        };
+        hb.beat();
+        let estimate = detect(hb.shared(), proc.as_mut(), &frame, &mut det, min_quality);
+        let d = Done {
+            ticket,
+            frame,
+            detection: det.clone(),
+            estimate,
+        };
+        if done.send(d).is_err() {
+            break;
+        }
+    }
+}
+
+/// Runs the processor on one frame, into `det`: the frame's estimate, or an `error` estimate
+/// (counted, and `det` cleared) when it fails.
+fn detect(
+    sh: &Shared,
+    proc: &mut dyn Processor,
+    frame: &Frame,
+    det: &mut Detection,
+    min_quality: f64,
+) -> Estimate {
+    let t = Instant::now();
+    let result = match frame.view() {
+        Ok(view) => proc.process(&view, det),
+        Err(e) => Err(e.into()),
+    };
+    let ms = t.elapsed().as_secs_f64() * 1e3;
+    match result {
+        Ok(()) => Estimate::from_detection(frame, det, ms, min_quality),
+        Err(e) => {
+            sh.count_detector_error();
+            tracing::warn!(seq = frame.seq, "detector: {e}");
+            *det = Detection::default();
+            let mut est = Estimate::empty(frame, Status::Error);
+            est.detector_ms = ms;
+            est.error = Some(e.to_string());
+            est
+        }
+    }
+}
+
+/// The publisher thread: releases the workers' estimates in frame order into `out`; while the
+/// camera is lost, publishes `camera_lost` once a second; every `status_interval`, the
+/// status. Finishes when every worker is gone and nothing waits.
+fn run_publisher(
+    hb: &Heartbeat,
+    estimates: Receiver<Done>,
+    mut order: Reorder,
+    mut out: Outlet,
+    status_interval: Duration,
+) {
+    let sh = hb.shared();
+    let mut last_status = Instant::now();
+    let mut last_lost: Option<Instant> = None;
+    let mut disconnected = false;
+    while !disconnected || !order.is_empty() {
+        hb.beat();
+        match estimates.recv_timeout(Duration::from_millis(100)) {
+            Ok(d) => order.insert(d),
+            Err(RecvTimeoutError::Timeout) => {}
+            Err(RecvTimeoutError::Disconnected) => disconnected = true,
+        }
+        order.skip_lost(disconnected);
+        while let Some(d) = order.pop() {
+            out.publish(sh, d);
+        }
+        if sh.source_state() == SourceState::Lost
+            && last_lost.map_or(true, |t| t.elapsed() >= Duration::from_secs(1))
+        {
+            last_lost = Some(Instant::now());
+            out.camera_lost(sh);
+        }
+        if last_status.elapsed() >= status_interval {
+            last_status = Instant::now();
+            out.status(sh);
+        }
+    }
+    out.finish();
+}
+
+/// The workers' estimates waiting for their turn: released strictly in ticket order.
+struct Reorder {
+    next_ticket: u64,
+    waiting: BTreeMap<u64, Done>,
+    /// More waiting than this means a ticket was lost.
+    max_waiting: usize,
+}
+
+impl Reorder {
+    fn new(max_waiting: usize) -> Self {
+        Reorder {
+            next_ticket: 0,
+            waiting: BTreeMap::new(),
+            max_waiting,
+        }
+    }
+
+    fn insert(&mut self, d: Done) {
+        self.waiting.insert(d.ticket, d);
+    }
+
+    fn is_empty(&self) -> bool {
+        self.waiting.is_empty()
+    }
+
+    /// A ticket that can never come back (a worker died mid-frame, or all workers are gone,
+    /// `disconnected`): go on with what is waiting, in order.
+    fn skip_lost(&mut self, disconnected: bool) {
+        if disconnected || self.waiting.len() > self.max_waiting {
+            if let Some(&t) = self.waiting.keys().next() {
+                self.next_ticket = self.next_ticket.max(t);
+            }
+        }
+    }
+
+    /// The estimate whose turn it is, if it has arrived.
+    fn pop(&mut self) -> Option<Done> {
+        let d = self.waiting.remove(&self.next_ticket)?;
+        self.next_ticket += 1;
+        Some(d)
+    }
+}
+
+/// Where the publisher thread puts each released estimate: the publishers, the recorder and
+/// the latest-frame slot (whose previous frame goes back to the source), after row guidance
+/// (when configured) has folded it in, in frame order.
+struct Outlet {
+    publishers: Vec<Box<dyn Publisher>>,
+    record: Option<Queue<RecordItem>>,
+    release: Release,
+    last_seq: u64,
+    guidance: Option<Guidance>,
+}
+
+impl Outlet {
+    fn new(
+        publishers: Vec<Box<dyn Publisher>>,
+        record: Option<Queue<RecordItem>>,
+        release: Release,
+    ) -> Self {
+        Outlet {
+            publishers,
+            record,
+            release,
+            last_seq: 0,
+            guidance: None,
+        }
+    }
+
+    fn publish(&mut self, sh: &Shared, done: Done) {
+        let Done {
+            frame,
+            detection,
+            mut estimate,
+            ..
+        } = done;
+        if let Some(g) = self.guidance.as_mut() {
+            estimate.apply_guidance(g);
+        }
+        estimate.stamp_published(now_ns());
+        self.last_seq = estimate.seq;
+        for p in self.publishers.iter_mut() {
+            if let Err(e) = p.publish(&estimate, Some(&frame)) {
+                tracing::debug!(publisher = p.name(), "publish: {e}");
+            }
+        }
+        sh.count_published(&estimate);
+        if let Some(r) = &self.record {
+            let item = RecordItem::Estimate(Box::new(estimate.clone()));
+            sh.count_record_dropped(send_drop_oldest(&r.tx, &r.rx, item));
+        }
+        let latest = Latest {
+            frame,
+            detection,
+            estimate,
+        };
+        if let Some(previous) = sh.replace_latest(latest) {
+            self.release.frame(previous.frame);
+        }
+    }
+
+    /// The camera is gone: a `camera_lost` estimate after the last published one.
+    fn camera_lost(&mut self, sh: &Shared) {
+        let e = Estimate::camera_lost(self.last_seq, now_ns());
+        for p in self.publishers.iter_mut() {
+            let _ = p.publish(&e, None);
+        }
+        sh.count_status(e.status);
+    }
+
+    /// The status summary: in the log and to the publishers.
+    fn status(&mut self, sh: &Shared) {
+        sh.update_rates();
+        let st = sh.status();
+        tracing::info!(
+            frames_in = st.frames_in,
+            frames_out = st.frames_out,
+            dropped = st.dropped,
+            fps = format_args!("{:.1}", st.fps_out),
+            detector_p50_ms = format_args!("{:.1}", st.detector_p50_ms),
+            detector_p99_ms = format_args!("{:.1}", st.detector_p99_ms),
+            latency_p99_ms = format_args!("{:.1}", st.latency_p99_ms),
+            source = st.source_state.name(),
+            recording = %st.recording,
+            "status"
+        );
+        for p in self.publishers.iter_mut() {
+            p.status(&st);
+        }
+    }
+
+    fn finish(&mut self) {
+        for p in self.publishers.iter_mut() {
+            p.finish();
+        }
     }
 }
 

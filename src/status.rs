@@ -120,6 +120,11 @@ impl Heartbeat {
     pub(crate) fn retire(self) {
         lock(&self.shared.heartbeats)[self.id].1 = 0;
     }
+
+    /// The status the thread reports to.
+    pub(crate) fn shared(&self) -> &Shared {
+        &self.shared
+    }
 }
 
 impl Shared {

@@ -131,3 +131,51 @@ fn guidance_and_mounting_mistakes_are_named() {
         "{stderr}"
     );
 }
+
+#[test]
+fn crossing_to_the_next_path_is_followed_without_a_jump() {
+    // 30 fps, the robot crosses one spacing to its left between 1 s and 5 s
+    let dir = tmpdir("crossing");
+    let cfg = dir.join("omnirow.toml");
+    std::fs::write(
+        &cfg,
+        "[source.synthetic]\nwidth = 408\nheight = 342\nfps = 30.0\nseed = 5\ncross_at_s = 1.0\n\n[http]\nenabled = false\n",
+    )
+    .unwrap();
+    let (sock, addr) = udp();
+    let mut child = bin()
+        .args(["run", "--frames", "180", "--no-print", "--udp"])
+        .arg(&addr)
+        .arg("--config")
+        .arg(&cfg)
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let est = collect(&sock, &mut child, Duration::from_secs(180));
+    assert!(child.wait_with_output().unwrap().status.success());
+    assert_eq!(est.len(), 180);
+    let mut last: Option<f64> = None;
+    let mut worst = 0.0f64;
+    for e in &est {
+        let g = e.guidance.as_ref().unwrap();
+        let t = e.truth.as_ref().unwrap();
+        assert_ne!(g.tracking, TrackState::Lost, "frame {}", e.seq);
+        let off = g.lateral_offset_m.unwrap();
+        // the followed line stays the centre of path 0, where the drive started
+        worst = worst.max((off - t.path_offset_m(0)).abs());
+        if let Some(prev) = last {
+            assert!(
+                (off - prev).abs() < 0.05,
+                "frame {}: jump {prev} -> {off}",
+                e.seq
+            );
+        }
+        last = Some(off);
+    }
+    assert!(worst < 0.03, "worst offset error {worst}");
+    let first = est[0].guidance.as_ref().unwrap();
+    let end = est[179].guidance.as_ref().unwrap();
+    assert_eq!(est[179].truth.as_ref().unwrap().path(), 1);
+    assert_eq!((first.row_index, end.row_index), (Some(0), Some(-1)));
+    assert!(end.lateral_offset_m.unwrap() > 0.35);
+}

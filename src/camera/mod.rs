@@ -7,6 +7,7 @@
 //! fisheye and a panoramic annular lens for the GC2450C's 2448×2050 sensor), so that it runs
 //! with no files at all.
 
+pub mod camera_info;
 mod ideal;
 mod ocam;
 mod pinhole;
@@ -383,7 +384,7 @@ impl Calibration {
 fn toml_error(text: &str, path: &Path, e: toml::de::Error) -> CalibError {
     let line = e
         .span()
-        .map(|s| text[..s.start.min(text.len())].lines().count().max(1))
+        .map(|s| text[..s.start.min(text.len())].matches('\n').count() + 1)
         .unwrap_or(1);
     CalibError::Parse {
         path: path.to_path_buf(),

@@ -58,8 +58,8 @@ pub struct ConversionError {
     pub samples: usize,
 }
 
-/// Degree of the direct polynomial fitted to a distorted lens.
-const DIRECT_DEGREE: usize = 8;
+/// Degrees of the direct polynomial tried for a distorted lens (the best fit is kept).
+const DIRECT_DEGREES: [usize; 5] = [6, 8, 10, 12, 14];
 
 impl Pinhole {
     /// Checks the numbers; names the first bad one.
@@ -214,31 +214,6 @@ impl Pinhole {
             DistortionModel::PlumbBob => [0usize, 1, 4].iter().any(|&i| self.k(i) != 0.0),
             DistortionModel::Equidistant => true,
         };
-        let ss = if radial {
-            let max_angle = self.monotone_angle();
-            let rho_max =
-                corner_rho.min(self.fx * self.distorted_radius(max_angle).unwrap_or(f64::INFINITY));
-            let ss = fit_direct(
-                |rho| self.angle_of_radius(rho / self.fx, max_angle),
-                rho_max,
-                DIRECT_DEGREE,
-            );
-            if ss[0] >= 0.0 {
-                return Err(format!(
-                    "[pinhole] the distortion gives no usable Taylor model (ss[0] = {})",
-                    ss[0]
-                ));
-            }
-            ss
-        } else {
-            vec![-self.fx, 0.0]
-        };
-        let centre = (self.cy, self.cx);
-        let affine = (aspect, 0.0, 0.0);
-        let size = (self.height, self.width);
-        let probe = OcamModel::new(ss.clone(), vec![1.0], centre, affine, size)?;
-        let invpol = OcamModel::fit_invpol(&ss, probe.rho_valid_max().min(corner_rho), 12);
-        let model = OcamModel::new(ss, invpol, centre, affine, size)?;
         let corner_px = [
             (0.0, 0.0),
             (0.0, w - 1.0),
@@ -254,13 +229,51 @@ impl Pinhole {
                 outer_radius_px: corner_px + 1.0,
             })
         });
-        let cal = Calibration {
-            model,
-            mask,
-            mounting,
+        let build = |ss: Vec<f64>| -> Result<(Calibration, ConversionError), String> {
+            let centre = (self.cy, self.cx);
+            let affine = (aspect, 0.0, 0.0);
+            let size = (self.height, self.width);
+            let probe = OcamModel::new(ss.clone(), vec![1.0], centre, affine, size)?;
+            let invpol = OcamModel::fit_invpol(&ss, probe.rho_valid_max().min(corner_rho), 12);
+            let cal = Calibration {
+                model: OcamModel::new(ss, invpol, centre, affine, size)?,
+                mask,
+                mounting,
+            };
+            let err = self.conversion_error(&cal);
+            Ok((cal, err))
         };
-        let err = self.conversion_error(&cal);
-        Ok((cal, err))
+        if !radial {
+            return build(vec![-self.fx, 0.0]);
+        }
+        let max_angle = self.monotone_angle();
+        let rho_max =
+            corner_rho.min(self.fx * self.distorted_radius(max_angle).unwrap_or(f64::INFINITY));
+        // The degree whose model lands closest to the pinhole's pixels.
+        let mut best: Option<(Calibration, ConversionError)> = None;
+        let mut last_problem = String::new();
+        for degree in DIRECT_DEGREES {
+            let ss = fit_direct(
+                |rho| self.angle_of_radius(rho / self.fx, max_angle),
+                rho_max,
+                degree,
+            );
+            match build(ss) {
+                Ok(c) => {
+                    let better = match &best {
+                        Some(b) => c.1.max_px < b.1.max_px,
+                        None => true,
+                    };
+                    if better {
+                        best = Some(c);
+                    }
+                }
+                Err(p) => last_problem = p,
+            }
+        }
+        best.ok_or_else(|| {
+            format!("[pinhole] the distortion gives no usable Taylor model: {last_problem}")
+        })
     }
 
     /// Pixel → Taylor ray → pinhole pixel over a grid of about 200 × 200 pixels.

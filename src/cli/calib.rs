@@ -1,6 +1,9 @@
-//! `omnirow calib`: show a calibration, or write one of the ideal lens models omnirow ships.
+//! `omnirow calib`: show a calibration, write one of the ideal lens models omnirow ships, or
+//! convert a ROS camera_info YAML into omnirow's perspective TOML form.
 
-use crate::camera::{Calibration, IdealLens};
+use crate::camera::{
+    camera_info, Calibration, ConversionError, IdealLens, Mounting, Pinhole, PinholeToml,
+};
 use anyhow::Context;
 use clap::{Subcommand, ValueEnum};
 use std::path::PathBuf;
@@ -25,6 +28,15 @@ pub enum CalibCommand {
         /// Output format.
         #[arg(long, value_enum, default_value_t = Format::Toml)]
         format: Format,
+    },
+    /// Convert a ROS camera_info YAML (plumb_bob or equidistant) into omnirow's TOML
+    /// calibration (a [pinhole] table) and print the conversion's error in pixels.
+    FromCameraInfo {
+        /// camera_info YAML: camera_calibration's file or a CameraInfo message.
+        file: PathBuf,
+        /// The omnirow TOML calibration to write.
+        #[arg(long, value_name = "FILE.toml")]
+        out: PathBuf,
     },
 }
 
@@ -54,6 +66,39 @@ pub fn run(cmd: CalibCommand) -> anyhow::Result<ExitCode> {
         CalibCommand::Show { file } => {
             let cal = Calibration::load(&file)?;
             print!("{}", describe(&cal));
+            // A perspective calibration: how far its Taylor model lands from it.
+            let text = std::fs::read_to_string(&file).unwrap_or_default();
+            if let Ok(raw) = toml::from_str::<PinholeToml>(&text) {
+                if let Ok((_, err)) = raw.pinhole.to_calibration(raw.mask, raw.mounting) {
+                    println!("{}", conversion_line(&raw.pinhole, &err));
+                }
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+        CalibCommand::FromCameraInfo { file, out } => {
+            anyhow::ensure!(
+                out.extension().is_some_and(|e| e == "toml"),
+                "--out {}: omnirow's calibration is TOML; give a .toml file name",
+                out.display()
+            );
+            let pinhole = camera_info::load(&file)?;
+            let (_, err) = pinhole
+                .to_calibration(None, Mounting::default())
+                .map_err(|p| anyhow::anyhow!("{}: {p}", file.display()))?;
+            let line = conversion_line(&pinhole, &err);
+            let raw = PinholeToml {
+                pinhole,
+                mask: None,
+                mounting: Mounting::default(),
+            };
+            let text = format!(
+                "# Converted by omnirow calib from-camera-info from {}.\n# {line}\n# Set [mounting] to the camera's pose on the robot (see config/calibration.example.toml).\n\n{}",
+                file.display(),
+                raw.to_toml()
+            );
+            std::fs::write(&out, text).with_context(|| format!("writing {}", out.display()))?;
+            println!("{line}");
+            eprintln!("calib: wrote {}", out.display());
             Ok(ExitCode::SUCCESS)
         }
         CalibCommand::Ideal {
@@ -74,6 +119,25 @@ pub fn run(cmd: CalibCommand) -> anyhow::Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
     }
+}
+
+/// The conversion's error as one line.
+fn conversion_line(p: &Pinhole, e: &ConversionError) -> String {
+    let tangential = p.distortion_model == crate::camera::DistortionModel::PlumbBob
+        && p.d.iter().skip(2).take(2).any(|&v| v != 0.0);
+    format!(
+        "conversion      Taylor model vs the pinhole over the image: max {:.4} px at row {:.0}, col {:.0}, RMS {:.4} px ({} pixels){}",
+        e.max_px,
+        e.worst_at[0],
+        e.worst_at[1],
+        e.rms_px,
+        e.samples,
+        if tangential {
+            "; tangential distortion (p1, p2) has no Taylor counterpart"
+        } else {
+            ""
+        }
+    )
 }
 
 /// A human-readable description of a calibration (what `calib show` prints).

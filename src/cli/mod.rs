@@ -9,6 +9,7 @@ mod config;
 pub mod detect;
 mod eval;
 mod eval_real;
+mod recording;
 mod run;
 mod synth;
 
@@ -49,6 +50,9 @@ pub enum Command {
     },
     /// List the GigE Vision / USB3 Vision cameras Aravis finds (needs the `camera` feature).
     Cameras(cameras::CamerasArgs),
+    /// Check MCAP recordings for damage, or repair one (docs/recording.md).
+    #[command(subcommand)]
+    Recording(recording::RecordingCommand),
 }
 
 /// Parses the process arguments and runs the command.
@@ -67,6 +71,7 @@ pub fn main() -> anyhow::Result<ExitCode> {
         Command::Run(a) => run::run(*a, None),
         Command::Record { out, args } => run::run(*args, Some(out)),
         Command::Cameras(a) => cameras::run(a),
+        Command::Recording(c) => recording::run(c),
     }
 }
 

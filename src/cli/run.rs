@@ -306,10 +306,15 @@ pub fn run(args: RunArgs, record_to: Option<PathBuf>) -> anyhow::Result<ExitCode
         publishers.push(p);
     }
 
-    let recorder = match &cfg.record {
-        Some(r) => Some(Recorder::new(r.clone())?),
-        None => None,
-    };
+    // A recording that cannot start does not stop detection: the node runs, says so on
+    // /healthz and /metrics, and exits non-zero at the end.
+    let recorder = cfg.record.as_ref().map(|r| {
+        Recorder::new(r.clone()).unwrap_or_else(|e| {
+            tracing::error!("recording not started: {e}; detection goes on");
+            Recorder::failed(r.clone(), e.to_string())
+        })
+    });
+    let record_health = recorder.as_ref().map(Recorder::health);
 
     // Signals before threads start, so none is missed.
     let term = Arc::new(AtomicBool::new(false));
@@ -426,6 +431,12 @@ pub fn run(args: RunArgs, record_to: Option<PathBuf>) -> anyhow::Result<ExitCode
     }
     if st.source_state == SourceState::Lost && !stopping {
         bail!("the camera was lost");
+    }
+    if let Some(why) = record_health.and_then(|h| h.failure()) {
+        bail!(
+            "the recording {why}; {} frames recorded",
+            st.recorded_frames
+        );
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -92,6 +92,24 @@ impl Drop for HttpServer {
 
 const MAX_REQUEST: u64 = 16 * 1024;
 
+/// Reads a request's line and headers (up to the blank line; the caller bounds the bytes):
+/// its method and its path without the query. Empty strings where the line lacks them.
+pub fn read_request(reader: &mut impl BufRead) -> std::io::Result<(String, String)> {
+    let mut line = String::new();
+    reader.read_line(&mut line)?;
+    let mut parts = line.split_whitespace();
+    let (method, target) = (parts.next().unwrap_or(""), parts.next().unwrap_or(""));
+    let path = target.split('?').next().unwrap_or("");
+    let request = (method.to_string(), path.to_string());
+    loop {
+        let mut h = String::new();
+        if reader.read_line(&mut h)? == 0 || h == "\r\n" || h == "\n" {
+            break;
+        }
+    }
+    Ok(request)
+}
+
 fn serve(
     conn: TcpStream,
     shared: &Shared,
@@ -102,18 +120,8 @@ fn serve(
     conn.set_read_timeout(Some(Duration::from_secs(2)))?;
     conn.set_write_timeout(Some(Duration::from_secs(5)))?;
     let mut reader = BufReader::new((&conn).take(MAX_REQUEST));
-    let mut line = String::new();
-    reader.read_line(&mut line)?;
-    let mut parts = line.split_whitespace();
-    let (method, target) = (parts.next().unwrap_or(""), parts.next().unwrap_or(""));
-    // Read the headers up to the blank line (bounded by MAX_REQUEST).
-    loop {
-        let mut h = String::new();
-        if reader.read_line(&mut h)? == 0 || h == "\r\n" || h == "\n" {
-            break;
-        }
-    }
-    let path = target.split('?').next().unwrap_or("");
+    let (method, path) = read_request(&mut reader)?;
+    let (method, path) = (method.as_str(), path.as_str());
     let mut out = &conn;
     if method != "GET" && method != "HEAD" {
         return respond(&mut out, method, 405, "text/plain", b"only GET and HEAD\n");
@@ -123,8 +131,11 @@ fn serve(
             let alive = shared.alive();
             let state = shared.source_state();
             let ok = alive && matches!(state, SourceState::Streaming | SourceState::Starting);
+            // Detection is what health means; the recording's state is said alongside.
+            let recording =
+                serde_json::to_string(&shared.status().recording).unwrap_or_else(|_| "\"\"".into());
             let body = format!(
-                "{{\"healthy\":{ok},\"pipeline_alive\":{alive},\"source\":\"{}\",\"frames_in\":{}}}\n",
+                "{{\"healthy\":{ok},\"pipeline_alive\":{alive},\"source\":\"{}\",\"frames_in\":{},\"recording\":{recording}}}\n",
                 state.name(),
                 shared.frames_in()
             );
@@ -312,6 +323,14 @@ pub fn metrics(shared: &Shared) -> String {
         "gauge",
         "1 while a recording is being written.",
         &plain(f64::from(u8::from(s.recording.starts_with("recording")))),
+    );
+    metric(
+        "omnirow_recording_failed",
+        "gauge",
+        "1 when the recording failed or stopped at the disk reserve (detection goes on).",
+        &plain(f64::from(u8::from(
+            s.recording.starts_with("failed") || s.recording.starts_with("stopped"),
+        ))),
     );
     metric(
         "omnirow_estimates_total",

@@ -9,9 +9,11 @@
 //! Every frame closes its chunk and hands it to the OS; the file is synced to disk at least
 //! every `sync_interval`, so a power cut loses at most that much. Files rotate by size or
 //! duration, and recording stops (detection goes on) when free space would fall below the
-//! reserve. Each file carries the calibration as the attachment `calibration.toml`. [`image_msg`] holds the CDR and Foxglove image codecs.
+//! reserve, and resumes into a new file once space is back. [`salvage`] reads files that were
+//! damaged afterwards. Each file carries the calibration as the attachment `calibration.toml`. [`image_msg`] holds the CDR and Foxglove image codecs.
 
 pub mod image_msg;
+pub mod salvage;
 
 use crate::estimate::Estimate;
 use crate::frame::Frame;
@@ -27,6 +29,11 @@ pub const IMAGE_TOPIC: &str = "/omnirow/image_raw";
 pub const ESTIMATE_TOPIC: &str = "/omnirow/estimate";
 /// Topic of the ground-truth channel (synthetic frames only).
 pub const TRUTH_TOPIC: &str = "/omnirow/ground_truth";
+
+/// How often a recording stopped at the disk reserve looks whether space came back.
+const RESUME_CHECK_EVERY: Duration = Duration::from_secs(5);
+/// Free space above the reserve needed to resume.
+const RESUME_MARGIN: u64 = 64 << 20;
 
 /// Name of the attachment holding the calibration (omnirow TOML).
 pub const CALIBRATION_ATTACHMENT: &str = "calibration.toml";
@@ -143,13 +150,14 @@ impl Default for RecordOptions {
 }
 
 /// The recorder's state, for the status summary and /metrics.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
 pub enum RecordState {
     Recording(PathBuf),
     /// Stopped because the disk reserve was reached (detection goes on).
     StoppedDiskFull,
     /// Stopped after an I/O error (detection goes on).
     Failed(String),
+    #[default]
     Closed,
 }
 
@@ -165,11 +173,47 @@ struct OpenFile {
     estimate_seq: u32,
 }
 
+/// The recorder's state as other threads see it (the node's exit code), updated by the
+/// recorder whenever it changes, with the first failure kept.
+#[derive(Debug, Clone, Default)]
+pub struct RecordHealth(std::sync::Arc<std::sync::Mutex<(RecordState, Option<String>)>>);
+
+impl RecordHealth {
+    pub fn get(&self) -> RecordState {
+        self.lock().0.clone()
+    }
+
+    /// Why the recording failed or never started, if it ever did (even if it resumed).
+    pub fn failure(&self) -> Option<String> {
+        self.lock().1.clone()
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, (RecordState, Option<String>)> {
+        self.0.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    fn set(&self, s: &RecordState) {
+        let mut g = self.lock();
+        let why = match s {
+            RecordState::StoppedDiskFull => {
+                Some("stopped: free space reached the disk reserve (record.reserve_mb)".into())
+            }
+            RecordState::Failed(why) => Some(format!("failed: {why}")),
+            RecordState::Recording(_) | RecordState::Closed => None,
+        };
+        if g.1.is_none() {
+            g.1 = why;
+        }
+        g.0 = s.clone();
+    }
+}
+
 /// Writes frames and estimates into rotating MCAP files.
 pub struct Recorder {
     opts: RecordOptions,
     file: Option<OpenFile>,
     state: RecordState,
+    health: RecordHealth,
     files: Vec<PathBuf>,
     next_index: u32,
     scratch: Vec<u8>,
@@ -187,10 +231,30 @@ impl Recorder {
             path: opts.dir.clone(),
             source,
         })?;
-        let mut r = Recorder {
+        let mut r = Recorder::idle(opts);
+        if r.space_ok(0)? {
+            r.open()?;
+        } else {
+            tracing::error!(dir = %r.opts.dir.display(), reserve_mb = r.opts.reserve_bytes >> 20,
+                "not recording: free space is below the reserve; detection goes on");
+            r.set_state(RecordState::StoppedDiskFull);
+        }
+        Ok(r)
+    }
+
+    /// A recorder that could not start (`why`): it records nothing, and says so in its state.
+    pub fn failed(opts: RecordOptions, why: String) -> Self {
+        let mut r = Recorder::idle(opts);
+        r.set_state(RecordState::Failed(why));
+        r
+    }
+
+    fn idle(opts: RecordOptions) -> Self {
+        Recorder {
             opts,
             file: None,
             state: RecordState::Closed,
+            health: RecordHealth::default(),
             files: Vec::new(),
             next_index: 0,
             scratch: Vec::new(),
@@ -199,15 +263,17 @@ impl Recorder {
             since_space_check: 0,
             frames_written: 0,
             bytes_written: 0,
-        };
-        if r.space_ok(0)? {
-            r.open()?;
-        } else {
-            tracing::warn!(dir = %r.opts.dir.display(), reserve_mb = r.opts.reserve_bytes >> 20,
-                "not recording: free space is below the reserve");
-            r.state = RecordState::StoppedDiskFull;
         }
-        Ok(r)
+    }
+
+    /// The state, shared with other threads.
+    pub fn health(&self) -> RecordHealth {
+        self.health.clone()
+    }
+
+    fn set_state(&mut self, s: RecordState) {
+        self.health.set(&s);
+        self.state = s;
     }
 
     pub fn state(&self) -> &RecordState {
@@ -320,9 +386,12 @@ impl Recorder {
                 )
             }
         };
+        // The schemas and channels in a chunk of their own: damage to the first frame's chunk
+        // does not take the definitions every later frame needs.
+        writer.flush().map_err(mc)?;
         tracing::info!(file = %path.display(), "recording");
         self.files.push(path.clone());
-        self.state = RecordState::Recording(path.clone());
+        self.set_state(RecordState::Recording(path.clone()));
         self.file = Some(OpenFile {
             path,
             writer,
@@ -442,7 +511,7 @@ impl Recorder {
     /// Rotation and the disk reserve, checked before each write.
     fn before_write(&mut self, need: u64) -> Result<(), RecordError> {
         if self.file.is_none() {
-            return Ok(());
+            return self.maybe_resume(need);
         }
         // Check free space every 64 MB written or every second, whichever comes first.
         self.since_space_check += need;
@@ -455,7 +524,7 @@ impl Recorder {
                 reserve_mb = self.opts.reserve_bytes >> 20,
                 "recording stopped: free space reached the reserve; detection goes on"
             );
-            self.state = RecordState::StoppedDiskFull;
+            self.set_state(RecordState::StoppedDiskFull);
             return Ok(());
         }
         let f = self.file.as_ref().expect("checked above");
@@ -465,6 +534,25 @@ impl Recorder {
         if (by_size || by_time) && f.bytes > 0 {
             self.close_file()?;
             self.open()?;
+        }
+        Ok(())
+    }
+
+    /// Stopped at the disk reserve: every few seconds, look again, and record into a new file
+    /// once the free space is back above the reserve (with a margin, so that it does not
+    /// flap).
+    fn maybe_resume(&mut self, need: u64) -> Result<(), RecordError> {
+        if self.state != RecordState::StoppedDiskFull
+            || self.last_space_check.elapsed() < RESUME_CHECK_EVERY
+        {
+            return Ok(());
+        }
+        if self.space_ok(need.saturating_add(RESUME_MARGIN))? {
+            self.open()?;
+            tracing::warn!(
+                dir = %self.opts.dir.display(),
+                "recording resumed: free space is above the reserve again"
+            );
         }
         Ok(())
     }
@@ -516,7 +604,7 @@ impl Recorder {
     pub fn finish(&mut self) -> Result<(), RecordError> {
         let r = self.close_file();
         if matches!(self.state, RecordState::Recording(_)) {
-            self.state = RecordState::Closed;
+            self.set_state(RecordState::Closed);
         }
         r
     }
@@ -524,7 +612,7 @@ impl Recorder {
     /// Marks the recorder failed after an error (the caller logs it); no more writes.
     pub fn fail(&mut self, why: String) {
         let _ = self.close_file();
-        self.state = RecordState::Failed(why);
+        self.set_state(RecordState::Failed(why));
     }
 }
 
@@ -668,6 +756,33 @@ mod tests {
         r.write_frame(&frame(0)).unwrap();
         assert_eq!(r.frames_written(), 0);
         assert!(r.files().is_empty());
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    #[test]
+    fn recording_resumes_when_space_comes_back_and_the_failure_is_kept() {
+        let d = dir("resume");
+        let mut r = Recorder::new(RecordOptions {
+            dir: d.clone(),
+            reserve_bytes: u64::MAX / 2,
+            ..RecordOptions::default()
+        })
+        .unwrap();
+        let health = r.health();
+        assert_eq!(health.get(), RecordState::StoppedDiskFull);
+        r.write_frame(&frame(0)).unwrap();
+        assert!(r.files().is_empty(), "not before the check interval");
+        // Space comes back (a smaller reserve) and the interval passes.
+        r.opts.reserve_bytes = 0;
+        r.last_space_check = Instant::now() - RESUME_CHECK_EVERY;
+        r.write_frame(&frame(1)).unwrap();
+        assert_eq!(r.files().len(), 1);
+        assert_eq!(r.frames_written(), 1);
+        assert!(matches!(health.get(), RecordState::Recording(_)));
+        r.finish().unwrap();
+        assert_eq!(health.get(), RecordState::Closed);
+        let why = health.failure().expect("the stop is remembered");
+        assert!(why.contains("reserve"), "{why}");
         std::fs::remove_dir_all(&d).unwrap();
     }
 

@@ -3,21 +3,23 @@
 //! mono8, rgb8, bgr8 or 8-bit Bayer.
 //!
 //! Streams the file from start to end (never loads it whole), paced by the images' capture
-//! stamps (the log time where an image has none). A file cut short (power loss on the robot) replays every complete frame before the
-//! cut and then ends with a warning. Ground truth recorded on `/omnirow/ground_truth` travels
-//! with its frame again.
+//! stamps (the log time where an image has none). Damage does not end a replay: the file is
+//! read through [`crate::record::salvage`], which skips a damaged chunk and goes on with the
+//! next intact one; each skipped region is logged once with its offset and the frames it held.
+//! A file cut short (power loss on the robot) replays every intact frame before the cut and
+//! then ends with a warning. Ground truth recorded on `/omnirow/ground_truth` travels with its
+//! frame again.
 
 use super::{wait_due, Pacer, Poll, Rate, Source, SourceError, SourceState};
 use crate::frame::{Frame, PixelFormat};
 use crate::record::image_msg::{self, ImageMsg};
+use crate::record::salvage::{Damage, Event, Salvage, SalvageError};
 use crate::record::TRUTH_TOPIC;
 use crate::synth::GroundTruth;
 use mcap::records::Record;
-use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOptions};
-use std::collections::{HashMap, VecDeque};
+use std::collections::{HashMap, HashSet, VecDeque};
 use std::fs::File;
-use std::io::Read;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -43,9 +45,10 @@ enum Codec {
 /// Replays the images of an MCAP file.
 pub struct McapReplay {
     opts: McapReplayOptions,
-    file: File,
-    reader: LinearReader,
+    reader: Salvage<File>,
     schemas: HashMap<u16, (String, String)>,
+    /// Channel ids defined so far.
+    defined: HashSet<u16>,
     image_channel: Option<(u16, Codec)>,
     truth_channel: Option<u16>,
     /// The truth channel holds JSON inside `std_msgs/msg/String` (record.json_channels).
@@ -55,7 +58,6 @@ pub struct McapReplay {
     pending: Option<(u64, Frame)>,
     seq: u64,
     frames_this_pass: u64,
-    bytes_read: u64,
     state: SourceState,
     scratch: Vec<u8>,
     calibration: Option<crate::camera::Calibration>,
@@ -64,33 +66,14 @@ pub struct McapReplay {
 impl McapReplay {
     /// Opens the file (errors name it).
     pub fn open(opts: McapReplayOptions) -> Result<Self, SourceError> {
-        let mut file = File::open(&opts.path).map_err(|source| SourceError::Io {
-            path: opts.path.clone(),
-            source,
-        })?;
-        let mut magic = [0u8; 8];
-        let n = read_retry(&mut file, &mut magic).map_err(|source| SourceError::Io {
-            path: opts.path.clone(),
-            source,
-        })?;
-        if n < 8 || magic != *mcap::MAGIC {
-            return Err(SourceError::Invalid {
-                path: opts.path.clone(),
-                problem: "not an MCAP file (no MCAP magic at the start)".into(),
-            });
-        }
-        drop(file);
+        let reader = open_salvage(&opts.path)?;
         let calibration = recorded_calibration(&opts.path)?;
-        let file = File::open(&opts.path).map_err(|source| SourceError::Io {
-            path: opts.path.clone(),
-            source,
-        })?;
         Ok(McapReplay {
             pacer: Pacer::new(opts.rate),
             opts,
-            file,
-            reader: new_reader(),
+            reader,
             schemas: HashMap::new(),
+            defined: HashSet::new(),
             image_channel: None,
             truth_channel: None,
             truth_in_string: false,
@@ -98,253 +81,287 @@ impl McapReplay {
             pending: None,
             seq: 0,
             frames_this_pass: 0,
-            bytes_read: 0,
             state: SourceState::Starting,
             scratch: Vec::new(),
             calibration,
         })
     }
 
-    fn invalid(&self, problem: String) -> SourceError {
-        SourceError::Invalid {
-            path: self.opts.path.clone(),
-            problem,
-        }
-    }
-
     fn rewind(&mut self) -> Result<(), SourceError> {
-        self.file = File::open(&self.opts.path).map_err(|source| SourceError::Io {
-            path: self.opts.path.clone(),
-            source,
-        })?;
-        self.reader = new_reader();
+        self.reader = open_salvage(&self.opts.path)?;
         self.schemas.clear();
+        self.defined.clear();
         self.image_channel = None;
         self.truth_channel = None;
         self.truths.clear();
         self.pacer.reset();
         self.frames_this_pass = 0;
-        self.bytes_read = 0;
         Ok(())
     }
 
     /// Reads records until the next image of the replayed channel: `(pace time, frame)`, or
-    /// `None` at the end of the file (clean or cut short).
+    /// `None` at the end of the file (clean or cut short). Damaged regions are skipped and
+    /// logged once each.
     fn next_image(&mut self) -> Result<Option<(u64, Frame)>, SourceError> {
+        let path = &self.opts.path;
         loop {
-            let event = match self.reader.next_event() {
+            let event = self
+                .reader
+                .next_event()
+                .map_err(|e| salvage_error(path, e))?;
+            let record = match event {
                 None => {
+                    if self.image_channel.is_none() && !self.reader.report().is_clean() {
+                        tracing::warn!(
+                            file = %path.display(),
+                            "no image channel survived: the recording is cut short or damaged before its channel definitions"
+                        );
+                        return Ok(None);
+                    }
                     if self.image_channel.is_none() {
-                        return Err(self.invalid(format!(
-                            "no image channel{} (supported: sensor_msgs/msg/Image in CDR, foxglove.RawImage)",
-                            self.opts
-                                .topic
-                                .as_ref()
-                                .map(|t| format!(" on topic {t}"))
-                                .unwrap_or_default()
-                        )));
+                        return Err(SourceError::Invalid {
+                            path: path.clone(),
+                            problem: format!(
+                                "no image channel{} (supported: sensor_msgs/msg/Image in CDR, foxglove.RawImage)",
+                                self.opts
+                                    .topic
+                                    .as_ref()
+                                    .map(|t| format!(" on topic {t}"))
+                                    .unwrap_or_default()
+                            ),
+                        });
+                    }
+                    if !self.reader.report().complete {
+                        tracing::warn!(
+                            file = %path.display(),
+                            frames = self.frames_this_pass,
+                            at_byte = self.reader.report().file_len,
+                            "recording cut short (no summary at its end): replayed every intact frame before the cut"
+                        );
                     }
                     return Ok(None);
                 }
-                Some(Err(e)) => {
-                    tracing::warn!(
-                        file = %self.opts.path.display(),
-                        frames = self.frames_this_pass,
-                        at_byte = self.bytes_read,
-                        "recording cut short ({e}): replayed every complete frame before the cut"
-                    );
-                    return Ok(None);
+                Some(Event::ChunkEnd) => continue,
+                Some(Event::Damage(d)) => {
+                    log_damage(path, d, self.image_channel.map(|(id, _)| id));
+                    continue;
                 }
-                Some(Ok(ev)) => ev,
+                Some(Event::Record(r)) => r,
             };
-            match event {
-                LinearReadEvent::ReadRequest(n) => {
-                    let buf = self.reader.insert(n);
-                    let got =
-                        read_retry(&mut self.file, buf).map_err(|source| SourceError::Io {
-                            path: self.opts.path.clone(),
-                            source,
-                        })?;
-                    self.bytes_read += got as u64;
-                    self.reader.notify_read(got);
+            match record {
+                Record::Schema { header, .. } => {
+                    self.schemas
+                        .insert(header.id, (header.name, header.encoding));
                 }
-                LinearReadEvent::Record { opcode, data } => {
-                    let record = match mcap::parse_record(opcode, data) {
-                        Ok(r) => r,
-                        Err(e) => {
-                            let msg = format!("bad record (opcode {opcode:#x}): {e}");
-                            tracing::warn!(file = %self.opts.path.display(), "{msg}; skipped");
+                Record::Channel(ch) => {
+                    self.defined.insert(ch.id);
+                    if ch.topic == TRUTH_TOPIC {
+                        self.truth_channel = Some(ch.id);
+                        self.truth_in_string = ch.message_encoding == "cdr";
+                        continue;
+                    }
+                    if self.image_channel.is_some() {
+                        continue;
+                    }
+                    if let Some(t) = &self.opts.topic {
+                        if *t != ch.topic {
                             continue;
                         }
-                    };
-                    match record {
-                        Record::Schema { header, .. } => {
-                            self.schemas
-                                .insert(header.id, (header.name, header.encoding));
+                    }
+                    let schema = self.schemas.get(&ch.schema_id);
+                    let codec = schema.and_then(|(name, _enc)| {
+                        match (name.as_str(), ch.message_encoding.as_str()) {
+                            ("sensor_msgs/msg/Image", "cdr") => Some(Codec::Ros2Image),
+                            ("foxglove_msgs/msg/RawImage", "cdr") => Some(Codec::FoxgloveCdr),
+                            ("foxglove.RawImage", "protobuf") => Some(Codec::FoxgloveProtobuf),
+                            ("foxglove.RawImage", "json") => Some(Codec::FoxgloveJson),
+                            _ => None,
                         }
-                        Record::Channel(ch) => {
-                            if ch.topic == TRUTH_TOPIC {
-                                self.truth_channel = Some(ch.id);
-                                self.truth_in_string = ch.message_encoding == "cdr";
-                                continue;
-                            }
-                            if self.image_channel.is_some() {
-                                continue;
-                            }
-                            if let Some(t) = &self.opts.topic {
-                                if *t != ch.topic {
-                                    continue;
-                                }
-                            }
-                            let schema = self.schemas.get(&ch.schema_id);
-                            let codec = schema.and_then(|(name, _enc)| {
-                                match (name.as_str(), ch.message_encoding.as_str()) {
-                                    ("sensor_msgs/msg/Image", "cdr") => Some(Codec::Ros2Image),
-                                    ("foxglove_msgs/msg/RawImage", "cdr") => {
-                                        Some(Codec::FoxgloveCdr)
-                                    }
-                                    ("foxglove.RawImage", "protobuf") => {
-                                        Some(Codec::FoxgloveProtobuf)
-                                    }
-                                    ("foxglove.RawImage", "json") => Some(Codec::FoxgloveJson),
-                                    _ => None,
-                                }
-                            });
-                            match codec {
-                                Some(c) => {
-                                    tracing::info!(topic = %ch.topic, codec = ?c, "replaying images");
-                                    self.image_channel = Some((ch.id, c));
-                                }
-                                None if self.opts.topic.is_some() => {
-                                    let (name, enc) = schema.cloned().unwrap_or_default();
-                                    return Err(self.invalid(format!(
-                                        "topic {} carries {name} ({enc}, messages {}), not an image type omnirow reads",
-                                        ch.topic, ch.message_encoding
-                                    )));
-                                }
-                                None => {}
-                            }
+                    });
+                    match codec {
+                        Some(c) => {
+                            tracing::info!(topic = %ch.topic, codec = ?c, "replaying images");
+                            self.image_channel = Some((ch.id, c));
                         }
-                        Record::Message { header, data } => {
-                            if Some(header.channel_id) == self.truth_channel {
-                                let json = if self.truth_in_string {
-                                    crate::record::decode_ros2_string(&data).unwrap_or(&[])
-                                } else {
-                                    &data[..]
-                                };
-                                match serde_json::from_slice::<GroundTruth>(json) {
-                                    Ok(t) => {
-                                        self.truths.push_back((header.publish_time, Arc::new(t)));
-                                        if self.truths.len() > 64 {
-                                            self.truths.pop_front();
-                                        }
-                                    }
-                                    Err(e) => tracing::warn!("bad ground truth message: {e}"),
-                                }
-                                continue;
-                            }
-                            let Some((id, codec)) = self.image_channel else {
-                                continue;
-                            };
-                            if header.channel_id != id {
-                                continue;
-                            }
-                            match decode(codec, &data, &mut self.scratch) {
-                                Ok((stamp, w, h, format)) => {
-                                    let capture_ns =
-                                        if stamp > 0 { stamp } else { header.log_time };
-                                    let truth = self
-                                        .truths
-                                        .iter()
-                                        .position(|(t, _)| *t == capture_ns)
-                                        .and_then(|i| self.truths.remove(i))
-                                        .map(|(_, t)| t);
-                                    let frame = Frame {
-                                        seq: self.seq,
-                                        capture_ns,
-                                        receive_ns: 0,
-                                        width: w,
-                                        height: h,
-                                        format,
-                                        data: std::mem::take(&mut self.scratch),
-                                        truth,
-                                    };
-                                    self.seq += 1;
-                                    self.frames_this_pass += 1;
-                                    // Paced by the capture clock (the camera's frame rate).
-                                    return Ok(Some((capture_ns, frame)));
-                                }
-                                Err(e) => tracing::warn!(
-                                    file = %self.opts.path.display(),
-                                    message = header.sequence,
-                                    "image message skipped: {e}"
+                        None if self.opts.topic.is_some() => {
+                            let (name, enc) = schema.cloned().unwrap_or_default();
+                            return Err(SourceError::Invalid {
+                                path: path.clone(),
+                                problem: format!(
+                                    "topic {} carries {name} ({enc}, messages {}), not an image type omnirow reads",
+                                    ch.topic, ch.message_encoding
                                 ),
-                            }
+                            });
                         }
-                        _ => {}
+                        None => {}
                     }
                 }
+                Record::Message { header, data } => {
+                    if Some(header.channel_id) == self.truth_channel {
+                        let json = if self.truth_in_string {
+                            crate::record::decode_ros2_string(&data).unwrap_or(&[])
+                        } else {
+                            &data[..]
+                        };
+                        match serde_json::from_slice::<GroundTruth>(json) {
+                            Ok(t) => {
+                                self.truths.push_back((header.publish_time, Arc::new(t)));
+                                if self.truths.len() > 64 {
+                                    self.truths.pop_front();
+                                }
+                            }
+                            Err(e) => tracing::warn!("bad ground truth message: {e}"),
+                        }
+                        continue;
+                    }
+                    if self.image_channel.is_none()
+                        && self.opts.topic.is_none()
+                        && !self.defined.contains(&header.channel_id)
+                        && decode(Codec::Ros2Image, &data, &mut self.scratch).is_ok()
+                    {
+                        // The channel definitions were lost to damage (and no intact summary
+                        // lends them): an undefined channel whose messages decode as
+                        // sensor_msgs/msg/Image is the image channel.
+                        tracing::warn!(
+                            file = %path.display(),
+                            channel = header.channel_id,
+                            "channel definitions lost to damage: replaying the undefined channel whose messages are sensor_msgs/msg/Image"
+                        );
+                        self.image_channel = Some((header.channel_id, Codec::Ros2Image));
+                    }
+                    let Some((id, codec)) = self.image_channel else {
+                        continue;
+                    };
+                    if header.channel_id != id {
+                        continue;
+                    }
+                    match decode(codec, &data, &mut self.scratch) {
+                        Ok((stamp, w, h, format)) => {
+                            let capture_ns = if stamp > 0 { stamp } else { header.log_time };
+                            let truth = self
+                                .truths
+                                .iter()
+                                .position(|(t, _)| *t == capture_ns)
+                                .and_then(|i| self.truths.remove(i))
+                                .map(|(_, t)| t);
+                            let frame = Frame {
+                                seq: self.seq,
+                                capture_ns,
+                                receive_ns: 0,
+                                width: w,
+                                height: h,
+                                format,
+                                data: std::mem::take(&mut self.scratch),
+                                truth,
+                            };
+                            self.seq += 1;
+                            self.frames_this_pass += 1;
+                            // Paced by the capture clock (the camera's frame rate).
+                            return Ok(Some((capture_ns, frame)));
+                        }
+                        Err(e) => tracing::warn!(
+                            file = %path.display(),
+                            message = header.sequence,
+                            "image message skipped: {e}"
+                        ),
+                    }
+                }
+                _ => {}
             }
         }
     }
+}
+
+/// Logs a skipped region once: where, why, and the frames it held.
+fn log_damage(path: &Path, d: &Damage, image_channel: Option<u16>) {
+    let frames = match image_channel.and_then(|c| d.held_on(c)) {
+        Some(n) => n.to_string(),
+        None => "unknown".into(),
+    };
+    if d.cut_short {
+        tracing::warn!(
+            file = %path.display(),
+            offset = d.offset,
+            bytes = d.len,
+            frames_lost = %frames,
+            "recording cut short: the last {} bytes are incomplete ({})",
+            d.len,
+            d.reason
+        );
+    } else {
+        tracing::warn!(
+            file = %path.display(),
+            offset = d.offset,
+            bytes = d.len,
+            frames_lost = %frames,
+            "damaged region skipped ({}); replay goes on with the next intact chunk",
+            d.reason
+        );
+    }
+}
+
+fn salvage_error(path: &Path, e: SalvageError) -> SourceError {
+    match e {
+        SalvageError::Io(source) => SourceError::Io {
+            path: path.to_path_buf(),
+            source,
+        },
+        e => SourceError::Invalid {
+            path: path.to_path_buf(),
+            problem: e.to_string(),
+        },
+    }
+}
+
+/// Opens `path` for salvage reading.
+fn open_salvage(path: &Path) -> Result<Salvage<File>, SourceError> {
+    let file = File::open(path).map_err(|source| SourceError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    Salvage::new(file).map_err(|e| salvage_error(path, e))
 }
 
 /// The calibration attached to a recording (`calibration.toml`, written before the first
-/// chunk), if any. Reads only up to the first chunk or message.
+/// chunk), if any. Reads only up to the end of the first intact chunk or message.
 pub fn recorded_calibration(
     path: &std::path::Path,
 ) -> Result<Option<crate::camera::Calibration>, SourceError> {
-    let io = |source| SourceError::Io {
-        path: path.to_path_buf(),
-        source,
-    };
-    let mut file = File::open(path).map_err(io)?;
-    let mut reader = LinearReader::new_with_options(
-        LinearReaderOptions::default()
-            .with_emit_chunks(true)
-            .with_record_length_limit(1 << 30),
-    );
-    while let Some(ev) = reader.next_event() {
-        let Ok(ev) = ev else { return Ok(None) };
-        match ev {
-            LinearReadEvent::ReadRequest(n) => {
-                let got = read_retry(&mut file, reader.insert(n)).map_err(io)?;
-                reader.notify_read(got);
-            }
-            LinearReadEvent::Record { opcode, data } => match mcap::parse_record(opcode, data) {
-                Ok(Record::Attachment { header, data, .. })
-                    if header.name == crate::record::CALIBRATION_ATTACHMENT =>
-                {
-                    let text = String::from_utf8_lossy(&data);
-                    let cal = crate::camera::Calibration::parse_toml(&text, path).map_err(|e| {
-                        SourceError::Invalid {
-                            path: path.to_path_buf(),
-                            problem: format!("attached calibration: {e}"),
-                        }
-                    })?;
-                    return Ok(Some(cal));
-                }
-                Ok(Record::Chunk { .. }) | Ok(Record::Message { .. }) | Err(_) => return Ok(None),
-                Ok(_) => {}
-            },
+    let mut reader = match open_salvage(path) {
+        Ok(r) => r,
+        Err(SourceError::Io { source, .. }) => {
+            return Err(SourceError::Io {
+                path: path.to_path_buf(),
+                source,
+            })
         }
-    }
-    Ok(None)
-}
-
-fn new_reader() -> LinearReader {
-    LinearReader::new_with_options(
-        LinearReaderOptions::default()
-            .with_validate_chunk_crcs(true)
-            .with_record_length_limit(1 << 30),
-    )
-}
-
-fn read_retry(f: &mut File, buf: &mut [u8]) -> std::io::Result<usize> {
+        Err(_) => return Ok(None),
+    };
     loop {
-        match f.read(buf) {
-            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
-            r => return r,
+        match reader.next_event() {
+            Ok(Some(Event::Record(Record::Attachment { header, data, .. })))
+                if header.name == crate::record::CALIBRATION_ATTACHMENT =>
+            {
+                let text = String::from_utf8_lossy(&data);
+                let cal = crate::camera::Calibration::parse_toml(&text, path).map_err(|e| {
+                    SourceError::Invalid {
+                        path: path.to_path_buf(),
+                        problem: format!("attached calibration: {e}"),
+                    }
+                })?;
+                return Ok(Some(cal));
+            }
+            Ok(Some(Event::ChunkEnd | Event::Record(Record::Message { .. }))) | Ok(None) => {
+                return Ok(None)
+            }
+            Ok(Some(_)) => {}
+            Err(SalvageError::Io(source)) => {
+                return Err(SourceError::Io {
+                    path: path.to_path_buf(),
+                    source,
+                })
+            }
+            Err(_) => return Ok(None),
         }
     }
 }
