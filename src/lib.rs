@@ -7,6 +7,7 @@
 //! command-line front end ([`cli`]) that the thin binary calls.
 
 pub mod camera;
+pub mod check;
 pub mod cli;
 pub mod config;
 pub mod detect;
@@ -15,6 +16,7 @@ pub mod eval;
 pub mod frame;
 pub mod gige;
 pub mod guidance;
+pub mod logging;
 pub mod notify;
 pub mod pipeline;
 pub mod publish;

@@ -20,6 +20,7 @@
 //! alive at once, whatever the input rate — for the GC2450C (5 MB a frame) with the defaults
 //! (2, 2, 4) that is 13 frames, 65 MB.
 
+use crate::check::{Check, Raw};
 use crate::detect::Detection;
 use crate::estimate::{Estimate, Status};
 use crate::frame::{now_ns, Frame, ImageView};
@@ -30,6 +31,7 @@ use crate::record::{RecordState, Recorder};
 use crate::source::{Poll, Source, SourceState};
 use crate::status::{Heartbeat, Latest, Shared, StatusSummary};
 use crossbeam_channel::{bounded, Receiver, RecvTimeoutError, Sender, TrySendError};
+use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
@@ -81,6 +83,48 @@ impl Default for PipelineOptions {
             poll_timeout: Duration::from_millis(50),
             guidance: None,
         }
+    }
+}
+
+/// `[pipeline]` of the node's configuration, as written.
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawPipeline {
+    frame_queue: Raw<i64>,
+    estimate_queue: Raw<i64>,
+    record_queue: Raw<i64>,
+    workers: Raw<i64>,
+    min_quality: Raw<f64>,
+}
+
+impl RawPipeline {
+    /// Checks `[pipeline]`, and `[publish] status_interval_s`: the options (the run's limits
+    /// are `[source]`'s) and the number of detector workers.
+    pub(crate) fn validate(
+        self,
+        status_interval_s: &Raw<f64>,
+        c: &mut Check,
+    ) -> (PipelineOptions, usize) {
+        let frame_queue = c.range("pipeline.frame_queue", &self.frame_queue, 2, 1, 64);
+        let estimate_queue = c.range("pipeline.estimate_queue", &self.estimate_queue, 8, 1, 1024);
+        let record_queue = c.range("pipeline.record_queue", &self.record_queue, 4, 1, 256);
+        let workers = c.range("pipeline.workers", &self.workers, 2, 1, 8);
+        let status_interval_s = c.range(
+            "publish.status_interval_s",
+            status_interval_s,
+            1.0,
+            0.05,
+            3600.0,
+        );
+        let options = PipelineOptions {
+            frame_queue: frame_queue as usize,
+            estimate_queue: estimate_queue as usize,
+            record_queue: record_queue as usize,
+            min_quality: c.range("pipeline.min_quality", &self.min_quality, 0.3, 0.0, 1.0),
+            status_interval: Duration::from_secs_f64(status_interval_s),
+            ..PipelineOptions::default()
+        };
+        (options, workers as usize)
     }
 }
 

@@ -2,8 +2,7 @@
 //! and TCP sockets and a real Unix datagram socket (systemd notify), stopped with SIGTERM.
 
 use omnirow::estimate::Estimate;
-use std::io::{Read, Write};
-use std::net::{TcpListener, TcpStream};
+use std::io::Read;
 use std::os::unix::net::UnixDatagram;
 use std::path::{Path, PathBuf};
 use std::process::Stdio;
@@ -183,104 +182,6 @@ fn slow_detector_drops_oldest_frames_and_counts_them() {
     assert_eq!(est.len() as u64, fout);
     // The newest frame always wins: the last frame is never the one dropped.
     assert_eq!(est.last().unwrap().seq, 19);
-}
-
-fn http_get(addr: &str, path: &str) -> (u16, String, Vec<u8>) {
-    let mut s = TcpStream::connect(addr).unwrap();
-    s.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
-    write!(
-        s,
-        "GET {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n"
-    )
-    .unwrap();
-    let mut buf = Vec::new();
-    s.read_to_end(&mut buf).unwrap();
-    let split = buf.windows(4).position(|w| w == b"\r\n\r\n").unwrap();
-    let head = String::from_utf8_lossy(&buf[..split]).into_owned();
-    let code = head.split_whitespace().nth(1).unwrap().parse().unwrap();
-    let body = buf[split + 4..].to_vec();
-    let len: usize = head
-        .lines()
-        .find_map(|l| l.strip_prefix("Content-Length: "))
-        .unwrap()
-        .parse()
-        .unwrap();
-    assert_eq!(len, body.len());
-    (code, head, body)
-}
-
-#[test]
-fn http_endpoint_serves_health_metrics_and_overlay() {
-    let dir = tmpdir("http");
-    let port = TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
-    let addr = format!("127.0.0.1:{port}");
-    let cfg = small_config(&dir, "");
-    let mut child = bin()
-        .args(["run", "--no-print", "--http", &addr, "--config"])
-        .arg(&cfg)
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    // Wait for the first frame to be published.
-    let t0 = Instant::now();
-    loop {
-        if TcpStream::connect(&addr).is_ok() {
-            let (code, _, body) = http_get(&addr, "/metrics");
-            assert_eq!(code, 200);
-            let text = String::from_utf8(body).unwrap();
-            if text.contains("omnirow_last_seq") {
-                break;
-            }
-        }
-        assert!(
-            t0.elapsed() < Duration::from_secs(30),
-            "no frame within 30 s"
-        );
-        std::thread::sleep(Duration::from_millis(100));
-    }
-    let (code, _, body) = http_get(&addr, "/healthz");
-    assert_eq!(code, 200);
-    let h: serde_json::Value = serde_json::from_slice(&body).unwrap();
-    assert_eq!(h["healthy"], true);
-    assert_eq!(h["source"], "streaming");
-
-    let (code, head, body) = http_get(&addr, "/metrics");
-    assert_eq!(code, 200);
-    assert!(head.contains("text/plain; version=0.0.4"));
-    let text = String::from_utf8(body).unwrap();
-    for m in [
-        "# TYPE omnirow_frames_in_total counter",
-        "omnirow_frames_dropped_total ",
-        "omnirow_detector_ms{quantile=\"0.99\"} ",
-        "omnirow_latency_ms{quantile=\"0.5\"} ",
-        "omnirow_source_state{state=\"streaming\"} 1",
-        "omnirow_pipeline_alive 1",
-    ] {
-        assert!(text.contains(m), "missing `{m}` in\n{text}");
-    }
-    let frames_in: f64 = text
-        .lines()
-        .find_map(|l| l.strip_prefix("omnirow_frames_in_total "))
-        .unwrap()
-        .parse()
-        .unwrap();
-    assert!(frames_in >= 1.0);
-
-    let (code, head, png) = http_get(&addr, "/overlay.png");
-    assert_eq!(code, 200);
-    assert!(head.contains("image/png"));
-    let img = image::load_from_memory(&png).unwrap().to_rgb8();
-    assert_eq!((img.width(), img.height()), (408, 342));
-    // Rows are drawn in red over the image.
-    assert!(img.pixels().any(|p| p.0 == [255, 32, 32]), "no row drawn");
-
-    assert_eq!(http_get(&addr, "/nope").0, 404);
-    sigterm(&child);
-    assert!(child.wait().unwrap().success());
 }
 
 #[test]

@@ -75,17 +75,8 @@ pub fn main() -> anyhow::Result<ExitCode> {
     }
 }
 
-/// Logs through tracing to stderr; `RUST_LOG` filters, `OMNIROW_LOG_FORMAT=json` selects JSON.
+/// Logs through tracing to stderr at level info; `RUST_LOG` filters, `OMNIROW_LOG_FORMAT=json`
+/// selects JSON (the node takes both from its configuration instead).
 pub fn init_logging() {
-    use tracing_subscriber::EnvFilter;
-    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"));
-    let json = std::env::var("OMNIROW_LOG_FORMAT").is_ok_and(|v| v == "json");
-    let builder = tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_writer(std::io::stderr);
-    let _ = if json {
-        builder.json().try_init()
-    } else {
-        builder.try_init()
-    };
+    crate::logging::init(crate::logging::LogFormat::Human, "info");
 }

@@ -9,21 +9,21 @@
 //! exit at once; the main loop polls the flag every 20 ms.
 
 use crate::camera::{Calibration, IdealLens};
-use crate::config::{CalibrationChoice, Config, LogFormat, SourceConfig, StdoutMode};
+use crate::config::Config;
 use crate::detect::{Detection, Detector};
 use crate::frame::ImageView;
 use crate::guidance::Guidance;
 use crate::notify::Notifier;
 use crate::pipeline::{Pipeline, Processor};
 use crate::publish::http::{HttpServer, OverlayFn};
-use crate::publish::stdout::StdoutPublisher;
+use crate::publish::stdout::{StdoutMode, StdoutPublisher};
 use crate::publish::udp::{UdpOptions, UdpPublisher};
 use crate::publish::Publisher;
 use crate::record::Recorder;
 use crate::source::folder::{FolderOptions, FolderReplay};
 use crate::source::mcap_replay::{McapReplay, McapReplayOptions};
 use crate::source::synthetic::SyntheticDrive;
-use crate::source::{Rate, Source, SourceState};
+use crate::source::{CalibrationChoice, Rate, ReplayConfig, Source, SourceConfig, SourceState};
 use crate::status::Latest;
 use anyhow::{bail, Context};
 use clap::Args;
@@ -101,7 +101,7 @@ fn configure(args: &RunArgs) -> anyhow::Result<Config> {
             SourceConfig::Replay(r) => (r.rate, r.looping, r.topic.clone(), r.fps),
             _ => (Rate::Recorded(1.0), false, None, 15.0),
         };
-        cfg.source = SourceConfig::Replay(crate::config::ReplayConfig {
+        cfg.source = SourceConfig::Replay(ReplayConfig {
             path: path.clone(),
             rate,
             looping,
@@ -166,22 +166,6 @@ fn configure(args: &RunArgs) -> anyhow::Result<Config> {
     Ok(cfg)
 }
 
-fn init_logging(cfg: &Config) {
-    use tracing_subscriber::EnvFilter;
-    let filter =
-        EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new(&cfg.log_level));
-    let json = cfg.log_format == LogFormat::Json
-        || std::env::var("OMNIROW_LOG_FORMAT").is_ok_and(|v| v == "json");
-    let builder = tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_writer(std::io::stderr);
-    let _ = if json {
-        builder.json().try_init()
-    } else {
-        builder.try_init()
-    };
-}
-
 /// The GigE Vision camera of `[gige]` (`[source] kind = "camera"`).
 #[cfg(feature = "camera")]
 fn camera_source(g: &crate::gige::GigeConfig) -> anyhow::Result<Box<dyn Source>> {
@@ -220,7 +204,7 @@ pub fn run(args: RunArgs, record_to: Option<PathBuf>) -> anyhow::Result<ExitCode
         rec.frame_id = cfg.frame_id.clone();
         cfg.record = Some(rec);
     }
-    init_logging(&cfg);
+    crate::logging::init(cfg.log_format, &cfg.log_level);
 
     // Source (opened now, so a missing file is an error before anything starts).
     let source: Box<dyn Source> = match &cfg.source {

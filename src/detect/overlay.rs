@@ -50,14 +50,7 @@ pub fn draw_overlay(
                 o.fill(v);
             }
         }
-        PixelFormat::BayerRggb8 => {
-            for r in 0..h {
-                for c in 0..w {
-                    let v = super::vegetation::brightness_at(view, r, c);
-                    rgb[3 * (r * w + c)..3 * (r * w + c) + 3].fill(v);
-                }
-            }
-        }
+        PixelFormat::BayerRggb8 => demosaic_rggb(view, rgb),
     }
     // Dim the background so the lines stand out.
     for v in rgb.iter_mut() {
@@ -105,6 +98,26 @@ pub fn draw_overlay(
     Ok(())
 }
 
+/// Demosaics Bayer RGGB `view` into `rgb` (w × h × 3) by 2×2 quads: each pixel gets its
+/// quad's red, mean green and blue (an odd last row or column reuses its neighbour's).
+fn demosaic_rggb(view: &ImageView, rgb: &mut [u8]) {
+    let (w, h, d) = (view.width as usize, view.height as usize, view.data);
+    for r0 in (0..h).step_by(2) {
+        let r1 = (r0 + 1).min(h - 1);
+        for c0 in (0..w).step_by(2) {
+            let c1 = (c0 + 1).min(w - 1);
+            let red = d[r0 * w + c0];
+            let green = (d[r0 * w + c1] as u16 + d[r1 * w + c0] as u16).div_ceil(2) as u8;
+            let blue = d[r1 * w + c1];
+            for r in r0..=r1 {
+                for c in c0..=c1 {
+                    rgb[3 * (r * w + c)..3 * (r * w + c) + 3].copy_from_slice(&[red, green, blue]);
+                }
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -139,5 +152,25 @@ mod tests {
         assert_eq!(&rgb[0..3], &[75, 75, 75]);
         // the VP (image top, along -x) is marked
         assert!(rgb.chunks_exact(3).any(|p| p == VP_COLOUR));
+    }
+
+    #[test]
+    fn bayer_is_drawn_in_colour() {
+        // 3x3 RGGB: quad (0,0) is green vegetation, the odd last column and row reuse it.
+        #[rustfmt::skip]
+        let data = [
+            40, 200, 10,
+            190, 30, 20,
+            50, 60, 70,
+        ];
+        let view = ImageView::new(3, 3, PixelFormat::BayerRggb8, &data).unwrap();
+        let mut rgb = vec![0; 27];
+        demosaic_rggb(&view, &mut rgb);
+        assert_eq!(&rgb[0..3], &[40, 195, 30]);
+        assert_eq!(&rgb[3..6], &[40, 195, 30]);
+        // quad (0,2): R 10, G (10 + 20) / 2 rounded, B 20 (column 2 is its own neighbour)
+        assert_eq!(&rgb[6..9], &[10, 15, 20]);
+        // quad (2,0): row 2 is its own neighbour: R 50, G (60 + 50) / 2, B 60
+        assert_eq!(&rgb[18..21], &[50, 55, 60]);
     }
 }

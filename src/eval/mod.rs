@@ -3,10 +3,9 @@
 //! plus speed per method, on synthetic images with ground truth.
 //!
 //! Owns the protocols, the scoring against ground truth, and the Markdown tables and PNG
-//! plots `omnirow eval` writes.
+//! charts (drawn with plotters, [`chart`]) `omnirow eval` writes.
 
-pub mod font;
-pub mod plot;
+pub mod chart;
 pub mod real;
 pub mod report;
 mod run;

@@ -1,7 +1,7 @@
 //! Writes an evaluation's results: Markdown tables beside the paper's figures, PNG plots of
 //! the detection rate against plant distance, and the raw outcomes as JSON lines.
 
-use super::plot::{Chart, Series};
+use super::chart::{Chart, Series};
 use super::run::EvalResults;
 use crate::detect::Method;
 use std::fmt::Write as _;
@@ -232,13 +232,15 @@ pub fn write(r: &EvalResults, dir: &Path, command: &str) -> Result<Vec<PathBuf>,
     written.push(md);
     for (l, name) in r.lens_names.iter().enumerate() {
         let png = dir.join(format!("detection_rate_{name}.png"));
+        let other = |e: &dyn std::fmt::Display| ReportError {
+            path: png.clone(),
+            source: std::io::Error::other(e.to_string()),
+        };
         detection_chart(r, l)
             .render()
+            .map_err(|e| other(&e))?
             .save(&png)
-            .map_err(|e| ReportError {
-                path: png.clone(),
-                source: std::io::Error::other(e),
-            })?;
+            .map_err(|e| other(&e))?;
         written.push(png);
     }
     let jl = dir.join("outcomes.jsonl");

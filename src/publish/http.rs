@@ -1,68 +1,152 @@
-//! The HTTP endpoint: /healthz, /metrics (Prometheus text format), /overlay.png (the latest
-//! frame with its rows and vanishing point drawn), /status (JSON) and / (a page that shows the
-//! overlay, refreshed every second).
+//! The HTTP service: `/healthz`, `/metrics` (Prometheus text format), `/status` (JSON),
+//! `/history.json` (the last minute of estimates), `/overlay.png` (the latest frame in colour
+//! with its rows and vanishing point drawn) and `/`, the live view (docs/http.md).
 //!
-//! A deliberately small HTTP/1.1 server on std::net: one thread, one request per connection
-//! (`Connection: close`), bounded request size and timeouts, GET and HEAD only. It reads the
-//! pipeline's shared state; it never slows the pipeline down (the overlay is drawn on request,
-//! from the latest frame, and cached per frame).
+//! Built on hyper (HTTP/1.1) over a tokio runtime confined to this service's thread: one
+//! thread drives every connection concurrently, and a single blocking thread draws overlays,
+//! so the pipeline's threads never run HTTP work. No client can block another: each
+//! connection is its own task, a client must send its request head within
+//! [`HttpOptions::header_timeout`] and in at most [`HttpOptions::max_header_bytes`], a
+//! connection lives at most [`HttpOptions::connection_lifetime`], and at most
+//! [`HttpOptions::max_connections`] are open at once (beyond that new ones are closed at
+//! once). The service reads the node's [`crate::status`]; it never slows the pipeline down.
 
+use super::live::{History, StatusDocument};
+use super::metrics::metrics;
+use crate::check::{Check, Raw};
 use crate::source::SourceState;
 use crate::status::{Latest, Shared};
-use std::io::{BufRead, BufReader, Read, Write};
-use std::net::{SocketAddr, TcpListener, TcpStream};
-use std::sync::atomic::{AtomicBool, Ordering};
+use bytes::Bytes;
+use http_body_util::Full;
+use hyper::header::{HeaderValue, CACHE_CONTROL, CONTENT_TYPE};
+use hyper::{Method, Request, Response, StatusCode};
+use hyper_util::rt::{TokioIo, TokioTimer};
+use std::convert::Infallible;
+use std::net::SocketAddr;
 use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::Duration;
+use tokio::sync::{oneshot, Semaphore};
+
+/// `[http]` of the node's configuration, as written.
+#[derive(Debug, Default, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawHttp {
+    enabled: Raw<bool>,
+    listen: Raw<String>,
+}
+
+impl RawHttp {
+    /// Checks `[http]`: the address to listen on, or None when the endpoint is disabled.
+    pub(crate) fn validate(self, c: &mut Check) -> Option<SocketAddr> {
+        if !c.get(&self.enabled, true) {
+            return None;
+        }
+        match &self.listen {
+            None => Some(SocketAddr::from(([127, 0, 0, 1], 8347))),
+            Some(s) => c.addr("http.listen", s),
+        }
+    }
+}
 
 /// Draws the overlay of the latest frame and encodes it as PNG.
 pub type OverlayFn = Arc<dyn Fn(&Latest) -> Result<Vec<u8>, String> + Send + Sync>;
 
-/// The running HTTP server.
+/// The service's limits.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HttpOptions {
+    /// Connections open at once; a connection beyond this is closed without an answer.
+    pub max_connections: usize,
+    /// Time a client has to send a whole request head.
+    pub header_timeout: Duration,
+    /// Longest life of one connection (keep-alive included).
+    pub connection_lifetime: Duration,
+    /// Largest request head, bytes (hyper's read buffer; at least 8192).
+    pub max_header_bytes: usize,
+    /// Time between two samples of the latest estimate for `/history.json`.
+    pub history_interval: Duration,
+    /// How far back `/history.json` goes.
+    pub history_window: Duration,
+}
+
+impl Default for HttpOptions {
+    fn default() -> Self {
+        HttpOptions {
+            max_connections: 256,
+            header_timeout: Duration::from_secs(5),
+            connection_lifetime: Duration::from_secs(60),
+            max_header_bytes: 16 * 1024,
+            history_interval: Duration::from_millis(200),
+            history_window: Duration::from_secs(60),
+        }
+    }
+}
+
+/// Errors starting the service.
+#[derive(Debug, thiserror::Error)]
+pub enum HttpError {
+    #[error("binding {addr}: {source}")]
+    Bind {
+        addr: SocketAddr,
+        source: std::io::Error,
+    },
+    #[error("starting the HTTP runtime: {0}")]
+    Runtime(std::io::Error),
+}
+
+/// The running HTTP service.
 pub struct HttpServer {
     addr: SocketAddr,
-    stop: Arc<AtomicBool>,
+    stop: Option<oneshot::Sender<()>>,
     thread: Option<JoinHandle<()>>,
 }
 
 impl HttpServer {
-    /// Binds `addr` and serves in a thread.
+    /// Binds `addr` and serves with the default [`HttpOptions`] in a thread.
     pub fn start(
         addr: SocketAddr,
         shared: Arc<Shared>,
         overlay: OverlayFn,
-    ) -> std::io::Result<Self> {
-        let listener = TcpListener::bind(addr)?;
-        listener.set_nonblocking(true)?;
-        let addr = listener.local_addr()?;
-        let stop = Arc::new(AtomicBool::new(false));
-        let st = stop.clone();
+    ) -> Result<Self, HttpError> {
+        Self::start_with(addr, shared, overlay, HttpOptions::default())
+    }
+
+    /// Binds `addr` and serves with `options` in a thread named `http`.
+    pub fn start_with(
+        addr: SocketAddr,
+        shared: Arc<Shared>,
+        overlay: OverlayFn,
+        options: HttpOptions,
+    ) -> Result<Self, HttpError> {
+        let runtime = tokio::runtime::Builder::new_current_thread()
+            .enable_io()
+            .enable_time()
+            .max_blocking_threads(1)
+            .thread_name("http-render")
+            .build()
+            .map_err(HttpError::Runtime)?;
+        let bind = |source| HttpError::Bind { addr, source };
+        let std_listener = std::net::TcpListener::bind(addr).map_err(bind)?;
+        std_listener.set_nonblocking(true).map_err(bind)?;
+        let listener = {
+            let _guard = runtime.enter();
+            tokio::net::TcpListener::from_std(std_listener).map_err(bind)?
+        };
+        let addr = listener.local_addr().map_err(bind)?;
+        let (stop, stopped) = oneshot::channel();
+        let service = Arc::new(Service::new(shared, overlay, &options));
         let thread = std::thread::Builder::new()
             .name("http".into())
             .spawn(move || {
-                let mut cache: Option<(u64, Vec<u8>)> = None;
-                while !st.load(Ordering::Relaxed) {
-                    match listener.accept() {
-                        Ok((conn, peer)) => {
-                            if let Err(e) = serve(conn, &shared, &overlay, &mut cache) {
-                                tracing::debug!(%peer, "HTTP: {e}");
-                            }
-                        }
-                        Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {
-                            std::thread::sleep(Duration::from_millis(20));
-                        }
-                        Err(e) => {
-                            tracing::warn!("HTTP accept: {e}");
-                            std::thread::sleep(Duration::from_millis(100));
-                        }
-                    }
-                }
-            })?;
-        tracing::info!(%addr, "HTTP endpoint: /healthz /metrics /overlay.png");
+                runtime.block_on(accept_loop(listener, service, options, stopped));
+                // Connections still open are dropped; an overlay being drawn may finish.
+                runtime.shutdown_timeout(Duration::from_secs(2));
+            })
+            .map_err(HttpError::Runtime)?;
+        tracing::info!(%addr, "HTTP service: / /healthz /metrics /status /history.json /overlay.png");
         Ok(HttpServer {
             addr,
-            stop,
+            stop: Some(stop),
             thread: Some(thread),
         })
     }
@@ -77,7 +161,9 @@ impl HttpServer {
     }
 
     fn shutdown(&mut self) {
-        self.stop.store(true, Ordering::Relaxed);
+        if let Some(s) = self.stop.take() {
+            let _ = s.send(());
+        }
         if let Some(t) = self.thread.take() {
             let _ = t.join();
         }
@@ -90,284 +176,185 @@ impl Drop for HttpServer {
     }
 }
 
-const MAX_REQUEST: u64 = 16 * 1024;
-
-/// Reads a request's line and headers (up to the blank line; the caller bounds the bytes):
-/// its method and its path without the query. Empty strings where the line lacks them.
-pub fn read_request(reader: &mut impl BufRead) -> std::io::Result<(String, String)> {
-    let mut line = String::new();
-    reader.read_line(&mut line)?;
-    let mut parts = line.split_whitespace();
-    let (method, target) = (parts.next().unwrap_or(""), parts.next().unwrap_or(""));
-    let path = target.split('?').next().unwrap_or("");
-    let request = (method.to_string(), path.to_string());
+async fn accept_loop(
+    listener: tokio::net::TcpListener,
+    service: Arc<Service>,
+    options: HttpOptions,
+    mut stopped: oneshot::Receiver<()>,
+) {
+    tokio::spawn(sample_history(service.clone(), options.history_interval));
+    let slots = Arc::new(Semaphore::new(options.max_connections));
     loop {
-        let mut h = String::new();
-        if reader.read_line(&mut h)? == 0 || h == "\r\n" || h == "\n" {
-            break;
-        }
-    }
-    Ok(request)
-}
-
-fn serve(
-    conn: TcpStream,
-    shared: &Shared,
-    overlay: &OverlayFn,
-    cache: &mut Option<(u64, Vec<u8>)>,
-) -> std::io::Result<()> {
-    conn.set_nonblocking(false)?;
-    conn.set_read_timeout(Some(Duration::from_secs(2)))?;
-    conn.set_write_timeout(Some(Duration::from_secs(5)))?;
-    let mut reader = BufReader::new((&conn).take(MAX_REQUEST));
-    let (method, path) = read_request(&mut reader)?;
-    let (method, path) = (method.as_str(), path.as_str());
-    let mut out = &conn;
-    if method != "GET" && method != "HEAD" {
-        return respond(&mut out, method, 405, "text/plain", b"only GET and HEAD\n");
-    }
-    match path {
-        "/healthz" => {
-            let alive = shared.alive();
-            let state = shared.source_state();
-            let ok = alive && matches!(state, SourceState::Streaming | SourceState::Starting);
-            // Detection is what health means; the recording's state is said alongside.
-            let recording =
-                serde_json::to_string(&shared.status().recording).unwrap_or_else(|_| "\"\"".into());
-            let body = format!(
-                "{{\"healthy\":{ok},\"pipeline_alive\":{alive},\"source\":\"{}\",\"frames_in\":{},\"recording\":{recording}}}\n",
-                state.name(),
-                shared.frames_in()
-            );
-            respond(
-                &mut out,
-                method,
-                if ok { 200 } else { 503 },
-                "application/json",
-                body.as_bytes(),
-            )
-        }
-        "/metrics" => respond(
-            &mut out,
-            method,
-            200,
-            "text/plain; version=0.0.4; charset=utf-8",
-            metrics(shared).as_bytes(),
-        ),
-        "/status" => {
-            let body = serde_json::to_string(&shared.status()).unwrap_or_default();
-            respond(&mut out, method, 200, "application/json", body.as_bytes())
-        }
-        "/overlay.png" => match shared.latest() {
-            None => respond(&mut out, method, 503, "text/plain", b"no frame yet\n"),
-            Some(latest) => {
-                let seq = latest.frame.seq;
-                if cache.as_ref().map_or(true, |(s, _)| *s != seq) {
-                    match overlay(&latest) {
-                        Ok(png) => *cache = Some((seq, png)),
-                        Err(e) => {
-                            let body = format!("overlay: {e}\n");
-                            return respond(&mut out, method, 500, "text/plain", body.as_bytes());
-                        }
-                    }
+        let (stream, peer) = tokio::select! {
+            _ = &mut stopped => return,
+            accepted = listener.accept() => match accepted {
+                Ok(c) => c,
+                Err(e) => {
+                    // E.g. out of file descriptors: wait rather than spin.
+                    tracing::warn!("HTTP accept: {e}");
+                    tokio::time::sleep(Duration::from_millis(100)).await;
+                    continue;
                 }
-                let png = &cache.as_ref().expect("filled above").1;
-                respond(&mut out, method, 200, "image/png", png)
+            },
+        };
+        let Ok(slot) = slots.clone().try_acquire_owned() else {
+            tracing::debug!(%peer, max = options.max_connections, "HTTP: too many connections, closing");
+            continue;
+        };
+        let _ = stream.set_nodelay(true);
+        let service = service.clone();
+        let options = options.clone();
+        tokio::spawn(async move {
+            let handler = hyper::service::service_fn(move |req| {
+                let service = service.clone();
+                async move { Ok::<_, Infallible>(service.handle(req).await) }
+            });
+            let conn = hyper::server::conn::http1::Builder::new()
+                .timer(TokioTimer::new())
+                .header_read_timeout(options.header_timeout)
+                .max_buf_size(options.max_header_bytes.max(8192))
+                .serve_connection(TokioIo::new(stream), handler);
+            match tokio::time::timeout(options.connection_lifetime, conn).await {
+                Ok(Ok(())) => {}
+                Ok(Err(e)) => tracing::debug!(%peer, "HTTP: {e}"),
+                Err(_) => tracing::debug!(%peer, "HTTP: connection lifetime reached"),
             }
-        },
-        "/" => respond(
-            &mut out,
-            method,
-            200,
-            "text/html; charset=utf-8",
-            INDEX.as_bytes(),
-        ),
-        _ => respond(&mut out, method, 404, "text/plain", b"not found\n"),
+            drop(slot);
+        });
     }
 }
 
-const INDEX: &str = "<!doctype html><html><head><meta charset=\"utf-8\"><title>omnirow</title>\
-<style>body{background:#222;color:#ddd;font-family:sans-serif}img{max-width:100%}</style></head>\
-<body><h1>omnirow</h1><p><a href=\"/metrics\">metrics</a> · <a href=\"/status\">status</a> · \
-<a href=\"/healthz\">health</a></p><img id=\"o\" src=\"/overlay.png\">\
-<script>setInterval(()=>{document.getElementById('o').src='/overlay.png?'+Date.now()},1000)</script>\
-</body></html>\n";
-
-fn respond(
-    out: &mut impl Write,
-    method: &str,
-    code: u16,
-    ctype: &str,
-    body: &[u8],
-) -> std::io::Result<()> {
-    let reason = match code {
-        200 => "OK",
-        404 => "Not Found",
-        405 => "Method Not Allowed",
-        500 => "Internal Server Error",
-        503 => "Service Unavailable",
-        _ => "",
-    };
-    write!(
-        out,
-        "HTTP/1.1 {code} {reason}\r\nContent-Type: {ctype}\r\nContent-Length: {}\r\nCache-Control: no-store\r\nConnection: close\r\n\r\n",
-        body.len()
-    )?;
-    if method != "HEAD" {
-        out.write_all(body)?;
+/// Samples the latest estimate into the history.
+async fn sample_history(service: Arc<Service>, every: Duration) {
+    let mut tick = tokio::time::interval(every);
+    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    loop {
+        tick.tick().await;
+        service.history.sample(&service.shared);
     }
-    out.flush()
 }
 
-/// The Prometheus text exposition of the pipeline's state.
-pub fn metrics(shared: &Shared) -> String {
-    use std::fmt::Write as _;
-    let s = shared.status();
-    let mut m = String::new();
-    let mut metric = |name: &str, kind: &str, help: &str, lines: &[(String, f64)]| {
-        let _ = writeln!(m, "# HELP {name} {help}");
-        let _ = writeln!(m, "# TYPE {name} {kind}");
-        for (labels, v) in lines {
-            let _ = writeln!(m, "{name}{labels} {v}");
+type Body = Full<Bytes>;
+
+/// What the handlers share.
+struct Service {
+    shared: Arc<Shared>,
+    overlay: OverlayFn,
+    history: History,
+    /// The PNG of the latest frame drawn so far (sequence number, bytes): one drawing per
+    /// frame however many clients ask, and one at a time.
+    overlay_cache: tokio::sync::Mutex<Option<(u64, Bytes)>>,
+}
+
+impl Service {
+    fn new(shared: Arc<Shared>, overlay: OverlayFn, options: &HttpOptions) -> Self {
+        Service {
+            shared,
+            overlay,
+            history: History::new(options.history_window),
+            overlay_cache: tokio::sync::Mutex::new(None),
         }
-    };
-    let plain = |v: f64| vec![(String::new(), v)];
-    metric(
-        "omnirow_frames_in_total",
-        "counter",
-        "Frames delivered by the source.",
-        &plain(s.frames_in as f64),
-    );
-    metric(
-        "omnirow_frames_out_total",
-        "counter",
-        "Estimates published for frames.",
-        &plain(s.frames_out as f64),
-    );
-    metric(
-        "omnirow_frames_dropped_total",
-        "counter",
-        "Frames dropped because the detector was busy (oldest first).",
-        &plain(s.dropped as f64),
-    );
-    metric(
-        "omnirow_record_dropped_total",
-        "counter",
-        "Frames or estimates the recorder dropped because the disk was busy.",
-        &plain(s.record_dropped as f64),
-    );
-    metric(
-        "omnirow_recorded_frames_total",
-        "counter",
-        "Frames written to recordings.",
-        &plain(s.recorded_frames as f64),
-    );
-    metric(
-        "omnirow_detector_errors_total",
-        "counter",
-        "Frames the detector failed on.",
-        &plain(s.detector_errors as f64),
-    );
-    metric(
-        "omnirow_frames_per_second",
-        "gauge",
-        "Estimates published per second over the last status interval.",
-        &plain(s.fps_out),
-    );
-    metric(
-        "omnirow_detector_ms",
-        "summary",
-        "Detector time per frame over the last 1024 frames, milliseconds.",
-        &[
-            ("{quantile=\"0.5\"}".into(), s.detector_p50_ms),
-            ("{quantile=\"0.99\"}".into(), s.detector_p99_ms),
-        ],
-    );
-    metric(
-        "omnirow_latency_ms",
-        "summary",
-        "End-to-end latency (frame received to estimate published) over the last 1024 frames, milliseconds.",
-        &[
-            ("{quantile=\"0.5\"}".into(), s.latency_p50_ms),
-            ("{quantile=\"0.99\"}".into(), s.latency_p99_ms),
-        ],
-    );
-    let states = [
-        SourceState::Starting,
-        SourceState::Streaming,
-        SourceState::Lost,
-        SourceState::Ended,
-    ];
-    metric(
-        "omnirow_source_state",
-        "gauge",
-        "The source's state (1 for the current one).",
-        &states
-            .iter()
-            .map(|st| {
-                (
-                    format!("{{state=\"{}\"}}", st.name()),
-                    f64::from(u8::from(*st == s.source_state)),
-                )
-            })
-            .collect::<Vec<_>>(),
-    );
-    metric(
-        "omnirow_pipeline_alive",
-        "gauge",
-        "1 while every pipeline thread is looping.",
-        &plain(f64::from(u8::from(shared.alive()))),
-    );
-    metric(
-        "omnirow_recording",
-        "gauge",
-        "1 while a recording is being written.",
-        &plain(f64::from(u8::from(s.recording.starts_with("recording")))),
-    );
-    metric(
-        "omnirow_recording_failed",
-        "gauge",
-        "1 when the recording failed or stopped at the disk reserve (detection goes on).",
-        &plain(f64::from(u8::from(
-            s.recording.starts_with("failed") || s.recording.starts_with("stopped"),
-        ))),
-    );
-    metric(
-        "omnirow_estimates_total",
-        "counter",
-        "Estimates published, by status.",
-        &s.status_counts
-            .iter()
-            .map(|(k, v)| (format!("{{status=\"{k}\"}}"), *v as f64))
-            .collect::<Vec<_>>(),
-    );
-    if let Some(l) = shared.latest() {
-        let e = &l.estimate;
-        let opt = |v: Option<f64>| v.unwrap_or(f64::NAN);
-        metric(
-            "omnirow_heading_rad",
-            "gauge",
-            "Heading of the rows in the latest estimate (NaN without one).",
-            &plain(opt(e.heading_rad)),
-        );
-        metric(
-            "omnirow_tilt_rad",
-            "gauge",
-            "Tilt of the rows in the latest estimate (NaN without one).",
-            &plain(opt(e.tilt_rad)),
-        );
-        metric(
-            "omnirow_quality",
-            "gauge",
-            "Quality of the latest estimate.",
-            &plain(e.quality),
-        );
-        metric(
-            "omnirow_last_seq",
-            "gauge",
-            "Sequence number of the latest published frame.",
-            &plain(e.seq as f64),
-        );
     }
-    m
+
+    async fn handle(&self, req: Request<hyper::body::Incoming>) -> Response<Body> {
+        if req.method() != Method::GET && req.method() != Method::HEAD {
+            return text(StatusCode::METHOD_NOT_ALLOWED, "only GET and HEAD\n");
+        }
+        match req.uri().path() {
+            "/" => respond(
+                StatusCode::OK,
+                "text/html; charset=utf-8",
+                Bytes::from_static(super::live::PAGE.as_bytes()),
+            ),
+            "/healthz" => self.healthz(),
+            "/metrics" => respond(
+                StatusCode::OK,
+                "text/plain; version=0.0.4; charset=utf-8",
+                Bytes::from(metrics(&self.shared)),
+            ),
+            "/status" => json(&StatusDocument::now(&self.shared)),
+            "/history.json" => json(&self.history.document()),
+            "/overlay.png" => self.overlay().await,
+            _ => text(StatusCode::NOT_FOUND, "not found\n"),
+        }
+    }
+
+    fn healthz(&self) -> Response<Body> {
+        let alive = self.shared.alive();
+        let state = self.shared.source_state();
+        let ok = alive && matches!(state, SourceState::Streaming | SourceState::Starting);
+        let body = serde_json::json!({
+            "healthy": ok,
+            "pipeline_alive": alive,
+            "source": state.name(),
+            "frames_in": self.shared.frames_in(),
+            // Detection is what health means; the recording's state is said alongside.
+            "recording": self.shared.status().recording,
+        });
+        let code = if ok {
+            StatusCode::OK
+        } else {
+            StatusCode::SERVICE_UNAVAILABLE
+        };
+        respond(code, "application/json", Bytes::from(format!("{body}\n")))
+    }
+
+    async fn overlay(&self) -> Response<Body> {
+        let Some(latest) = self.shared.latest() else {
+            return text(StatusCode::SERVICE_UNAVAILABLE, "no frame yet\n");
+        };
+        let seq = latest.frame.seq;
+        let mut cache = self.overlay_cache.lock().await;
+        if let Some((s, png)) = cache.as_ref() {
+            if *s == seq {
+                return respond(StatusCode::OK, "image/png", png.clone());
+            }
+        }
+        let draw = self.overlay.clone();
+        match tokio::task::spawn_blocking(move || draw(&latest)).await {
+            Ok(Ok(png)) => {
+                let png = Bytes::from(png);
+                *cache = Some((seq, png.clone()));
+                respond(StatusCode::OK, "image/png", png)
+            }
+            Ok(Err(e)) => text(
+                StatusCode::INTERNAL_SERVER_ERROR,
+                &format!("overlay of frame {seq}: {e}\n"),
+            ),
+            Err(e) => text(
+                StatusCode::INTERNAL_SERVER_ERROR,
+                &format!("overlay of frame {seq}: the drawing thread failed: {e}\n"),
+            ),
+        }
+    }
+}
+
+fn respond(code: StatusCode, content_type: &'static str, body: Bytes) -> Response<Body> {
+    let mut r = Response::new(Full::new(body));
+    *r.status_mut() = code;
+    let h = r.headers_mut();
+    h.insert(CONTENT_TYPE, HeaderValue::from_static(content_type));
+    h.insert(CACHE_CONTROL, HeaderValue::from_static("no-store"));
+    r
+}
+
+fn text(code: StatusCode, body: &str) -> Response<Body> {
+    respond(
+        code,
+        "text/plain; charset=utf-8",
+        Bytes::from(body.to_owned()),
+    )
+}
+
+fn json(value: &impl serde::Serialize) -> Response<Body> {
+    match serde_json::to_vec(value) {
+        Ok(mut body) => {
+            body.push(b'\n');
+            respond(StatusCode::OK, "application/json", Bytes::from(body))
+        }
+        Err(e) => text(
+            StatusCode::INTERNAL_SERVER_ERROR,
+            &format!("encoding JSON: {e}\n"),
+        ),
+    }
 }

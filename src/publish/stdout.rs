@@ -6,6 +6,16 @@ use crate::frame::Frame;
 use std::io::Write;
 use std::sync::Arc;
 
+/// When estimates are printed on stdout (`[publish] stdout`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum StdoutMode {
+    /// When stdout is a terminal.
+    Auto,
+    Always,
+    Never,
+}
+
 /// Prints every estimate as one JSON line on stdout. A closed stdout (broken pipe) stops
 /// the printing, not the node.
 #[derive(Debug, Default)]

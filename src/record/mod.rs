@@ -12,8 +12,11 @@
 //! reserve, and resumes into a new file once space is back. [`salvage`] reads files that were
 //! damaged afterwards. Each file carries the calibration as the attachment `calibration.toml`. [`image_msg`] holds the CDR and Foxglove image codecs.
 
+mod config;
 pub mod image_msg;
 pub mod salvage;
+
+pub(crate) use config::RawRecord;
 
 use crate::estimate::Estimate;
 use crate::frame::Frame;

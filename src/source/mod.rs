@@ -2,15 +2,20 @@
 //!
 //! Owns the [`Source`] abstraction the pipeline's source thread drives — replay of MCAP
 //! recordings ([`mcap_replay`]), replay of image folders ([`folder`]), the synthetic drive
-//! ([`synthetic`]), and later the camera — and the replay [`Pacer`] (recorded rate, a multiple
-//! of it, or as fast as possible). A source never blocks longer than the timeout it is given,
+//! ([`synthetic`]), and the camera ([`gige`], feature `camera`) — the replay [`Pacer`]
+//! (recorded rate, a multiple of it, or as fast as possible), and the `[source]` and
+//! `[camera]` sections of the configuration ([`SourceConfig`], [`CalibrationChoice`]). A source never blocks longer than the timeout it is given,
 //! so the pipeline can always stop it and report its state.
 
+mod config;
 pub mod folder;
 #[cfg(feature = "camera")]
 pub mod gige;
 pub mod mcap_replay;
 pub mod synthetic;
+
+pub use config::{CalibrationChoice, ReplayConfig, SourceConfig};
+pub(crate) use config::{RawCamera, RawSource};
 
 use crate::frame::Frame;
 use std::time::{Duration, Instant};

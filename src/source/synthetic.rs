@@ -10,13 +10,15 @@
 
 use super::{Poll, Source, SourceError, SourceState};
 use crate::camera::{Calibration, IdealLens};
+use crate::check::{Check, Raw};
 use crate::frame::{now_ns, Frame};
 use crate::synth::{GroundTruth, Renderer, Scene, Style, SynthError, SynthOptions};
+use serde::Deserialize;
 use std::f64::consts::TAU;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-/// Settings of the drive: `[source.synthetic]` of the node's configuration (validated there).
+/// Settings of the drive: `[source.synthetic]` of the node's configuration.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SyntheticDriveOptions {
     pub fps: f64,
@@ -40,6 +42,87 @@ pub struct SyntheticDriveOptions {
 
 /// How long the crossing to the next inter-row path takes, seconds.
 pub const CROSSING_S: f64 = 4.0;
+
+/// `[source.synthetic]` as written.
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawSynthetic {
+    fps: Raw<f64>,
+    width: Raw<u32>,
+    height: Raw<u32>,
+    lens: Raw<IdealLens>,
+    colour: Raw<bool>,
+    seed: Raw<u64>,
+    speed_mps: Raw<f64>,
+    heading_amplitude_deg: Raw<f64>,
+    pitch_amplitude_deg: Raw<f64>,
+    offset_amplitude_m: Raw<f64>,
+    period_s: Raw<f64>,
+    cross_at_s: Raw<f64>,
+}
+
+impl RawSynthetic {
+    /// Checks `[source.synthetic]` into the drive's options.
+    pub(crate) fn validate(self, c: &mut Check) -> SyntheticDriveOptions {
+        let width = c.range("source.synthetic.width", &self.width, 612, 32, 8192);
+        let height = c.range("source.synthetic.height", &self.height, 512, 32, 8192);
+        for (k, v, x) in [
+            ("source.synthetic.width", &self.width, width),
+            ("source.synthetic.height", &self.height, height),
+        ] {
+            if let Some(s) = v {
+                if x % 2 != 0 {
+                    c.bad(k, s, format!("{x} must be even (Bayer quads)"));
+                }
+            }
+        }
+        SyntheticDriveOptions {
+            fps: c.range("source.synthetic.fps", &self.fps, 15.0, 0.1, 1000.0),
+            width,
+            height,
+            lens: c.get(&self.lens, IdealLens::Fisheye185),
+            colour: c.get(&self.colour, true),
+            seed: c.get(&self.seed, 1),
+            speed_mps: c.range(
+                "source.synthetic.speed_mps",
+                &self.speed_mps,
+                1.0,
+                0.0,
+                20.0,
+            ),
+            heading_amplitude_deg: c.range(
+                "source.synthetic.heading_amplitude_deg",
+                &self.heading_amplitude_deg,
+                8.0,
+                0.0,
+                45.0,
+            ),
+            pitch_amplitude_deg: c.range(
+                "source.synthetic.pitch_amplitude_deg",
+                &self.pitch_amplitude_deg,
+                3.0,
+                0.0,
+                15.0,
+            ),
+            offset_amplitude_m: c.range(
+                "source.synthetic.offset_amplitude_m",
+                &self.offset_amplitude_m,
+                0.1,
+                0.0,
+                5.0,
+            ),
+            period_s: c.range("source.synthetic.period_s", &self.period_s, 20.0, 0.1, 1e6),
+            cross_at_s: c.range(
+                "source.synthetic.cross_at_s",
+                &self.cross_at_s,
+                0.0,
+                0.0,
+                1e6,
+            ),
+            render_threads: 0,
+        }
+    }
+}
 
 /// The robot's pose relative to the rows at time `t` seconds: (yaw°, pitch°, lateral m,
 /// along m). Heading, pitch and offset are sinusoids with incommensurate phases; with

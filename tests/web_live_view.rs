@@ -1,0 +1,191 @@
+//! The live view in a real browser: headless Chromium (Debian's `chromium`, installed by
+//! .ci/run) loads `/` from a running `omnirow run`, and the test checks that the numbers the
+//! page shows are those of `/status` and that the frame and the plot render. The node runs the
+//! synthetic drive standing still, so every estimate is the same and the page and `/status`
+//! can be compared whenever each was read.
+//!
+//! `OMNIROW_LIVE_VIEW_PNG=PATH` keeps the screenshot (docs/live-view.png is made this way).
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Duration;
+
+#[path = "support/node.rs"]
+mod node;
+use node::*;
+#[path = "support/http.rs"]
+mod http;
+use http::*;
+
+/// The Chromium binary, or None (the test is skipped, except under CI where it fails).
+fn chromium() -> Option<PathBuf> {
+    let path = std::env::var_os("PATH").unwrap_or_default();
+    let dirs: Vec<PathBuf> = std::env::split_paths(&path).collect();
+    let found = std::env::var_os("OMNIROW_CHROMIUM")
+        .map(PathBuf::from)
+        .or_else(|| {
+            ["chromium", "chromium-browser", "google-chrome"]
+                .iter()
+                .flat_map(|b| dirs.iter().map(move |d| d.join(b)))
+                .find(|p| p.is_file())
+        });
+    if found.is_none() {
+        let why = "no chromium (apt-get install chromium, or set OMNIROW_CHROMIUM)";
+        if std::env::var("CI").is_ok_and(|v| v == "true") {
+            panic!("{why}");
+        }
+        eprintln!("skipped: {why}");
+    }
+    found
+}
+
+/// Runs headless Chromium on `url` with `args` (e.g. `--dump-dom`), giving the page `budget_ms`
+/// of virtual time; returns stdout.
+fn browse(chromium: &Path, profile: &Path, url: &str, budget_ms: u32, args: &[&str]) -> String {
+    let out = Command::new(chromium)
+        .args([
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--disable-quic",
+            "--no-first-run",
+            "--disable-background-networking",
+            "--disable-component-update",
+            "--disable-sync",
+            "--hide-scrollbars",
+            "--window-size=1400,900",
+        ])
+        .arg(format!("--user-data-dir={}", profile.display()))
+        .arg(format!("--virtual-time-budget={budget_ms}"))
+        .args(args)
+        .arg(url)
+        .output()
+        .expect("running chromium");
+    assert!(
+        out.status.success(),
+        "chromium failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// The text of the element with `id` in `dom`.
+fn text_of(dom: &str, id: &str) -> String {
+    let at = dom
+        .find(&format!("id=\"{id}\""))
+        .unwrap_or_else(|| panic!("no #{id} in the page"));
+    let start = at + dom[at..].find('>').unwrap() + 1;
+    let end = start + dom[start..].find('<').unwrap();
+    dom[start..end].trim().to_owned()
+}
+
+fn number(dom: &str, id: &str) -> f64 {
+    let t = text_of(dom, id);
+    t.parse()
+        .unwrap_or_else(|_| panic!("#{id} shows {t:?}, not a number"))
+}
+
+#[test]
+fn live_view_shows_the_status_numbers_frame_and_plot() {
+    let Some(chromium) = chromium() else {
+        return;
+    };
+    let dir = tmpdir("web-live-view");
+    // The synthetic drive standing still: every frame, so every estimate, is the same.
+    let cfg = dir.join("still.toml");
+    std::fs::write(
+        &cfg,
+        "[source.synthetic]\nwidth = 408\nheight = 342\nfps = 15.0\nseed = 5\nspeed_mps = 0.0\n\
+         heading_amplitude_deg = 0.0\npitch_amplitude_deg = 0.0\noffset_amplitude_m = 0.0\n",
+    )
+    .unwrap();
+    let node = Node::start(&cfg, &[]);
+    // A few seconds of history for the plot.
+    std::thread::sleep(Duration::from_secs(3));
+
+    let url = format!("http://{}/", node.addr);
+    let dom = browse(
+        &chromium,
+        &dir.join("profile-dom"),
+        &url,
+        5000,
+        &["--dump-dom"],
+    );
+    let (code, _, body) = node.get("/status");
+    assert_eq!(code, 200);
+    let st: serde_json::Value = serde_json::from_slice(&body).unwrap();
+    let latest = &st["latest"];
+    assert_eq!(text_of(&dom, "connection"), "live");
+    assert_eq!(
+        text_of(&dom, "source-state"),
+        st["source_state"].as_str().unwrap()
+    );
+    assert_eq!(
+        text_of(&dom, "estimate-status"),
+        latest["status"].as_str().unwrap()
+    );
+    let deg = |v: &serde_json::Value| v.as_f64().unwrap().to_degrees();
+    assert!(latest["heading_rad"].is_f64(), "no heading: {st}");
+    for (id, want, step) in [
+        ("heading", deg(&latest["heading_rad"]), 0.01),
+        ("tilt", deg(&latest["tilt_rad"]), 0.01),
+        ("quality", latest["quality"].as_f64().unwrap(), 0.001),
+    ] {
+        let shown = number(&dom, id);
+        assert!(
+            (shown - want).abs() <= step * 0.51 + 1e-9,
+            "#{id} shows {shown}, /status says {want}"
+        );
+    }
+    // The guidance's lateral offset in centimetres, or a dash while the node has none.
+    match latest["guidance"]["lateral_offset_m"].as_f64() {
+        Some(m) => assert!((number(&dom, "offset") - m * 100.0).abs() <= 0.051),
+        None => assert_eq!(text_of(&dom, "offset"), "–"),
+    }
+    let fps = number(&dom, "fps");
+    // Up to 15 fps; a loaded machine may detect fewer.
+    assert!(fps > 1.0 && fps < 20.0, "fps shown {fps}");
+    assert!(number(&dom, "seq") >= 1.0);
+    // The frame was loaded (its caption names the frame shown).
+    assert!(
+        text_of(&dom, "frame-seq").parse::<u64>().is_ok(),
+        "no frame shown"
+    );
+
+    let shot = dir.join("live-view.png");
+    browse(
+        &chromium,
+        &dir.join("profile-shot"),
+        &url,
+        5000,
+        &[&format!("--screenshot={}", shot.display())],
+    );
+    let img = image::open(&shot).expect("a screenshot").to_rgb8();
+    assert_eq!((img.width(), img.height()), (1400, 900));
+    // The plot's heading and quality lines are drawn in their colours.
+    let has = |c: [u8; 3]| {
+        img.pixels()
+            .filter(|p| p.0.iter().zip(c).all(|(a, b)| a.abs_diff(b) <= 12))
+            .count()
+    };
+    assert!(has([0xff, 0x9f, 0x1c]) > 50, "no heading line in the plot");
+    assert!(has([0x2e, 0xc4, 0xb6]) > 50, "no quality line in the plot");
+    // The frame is in colour: many pixels with a clear hue in the picture's area (left half).
+    let coloured = img
+        .enumerate_pixels()
+        .filter(|(x, y, p)| {
+            *x < 700 && *y > 50 && {
+                let (mx, mn) = (*p.0.iter().max().unwrap(), *p.0.iter().min().unwrap());
+                mx - mn > 30
+            }
+        })
+        .count();
+    assert!(
+        coloured > 20_000,
+        "only {coloured} coloured pixels in the frame's area"
+    );
+    if let Some(keep) = std::env::var_os("OMNIROW_LIVE_VIEW_PNG") {
+        std::fs::copy(&shot, keep).unwrap();
+    }
+    node.stop();
+}
