@@ -14,6 +14,7 @@
 use crate::check::Check;
 use crate::detect::DetectorOptions;
 use crate::gige::GigeConfig;
+use crate::guidance::{GuidanceConfig, GuidanceOptions};
 use crate::logging::{LogFormat, RawLog};
 use crate::pipeline::{PipelineOptions, RawPipeline};
 use crate::publish::http::RawHttp;
@@ -94,6 +95,8 @@ pub struct Config {
     pub detector: DetectorOptions,
     /// ROS 2 publishing (`[ros2]`, docs/ros2.md); off unless `enabled = true`.
     pub ros2: Ros2Config,
+    /// Row guidance (`[guidance]`, docs/guidance.md); `None` with `enabled = false`.
+    pub guidance: Option<GuidanceOptions>,
 }
 
 impl Default for Config {
@@ -116,6 +119,7 @@ struct RawConfig {
     detector: Option<DetectorOptions>,
     gige: Option<GigeConfig>,
     ros2: Option<Ros2Config>,
+    guidance: Option<GuidanceConfig>,
 }
 
 impl Config {
@@ -188,6 +192,15 @@ fn compose(raw: RawConfig, tables: Option<&Table>, c: &mut Check) -> Config {
     if let Err(e) = ros2.validate() {
         c.bad_at(format!("ros2.{}", e.key), at("ros2"), e.problem);
     }
+    let guidance = raw
+        .guidance
+        .unwrap_or_default()
+        .options()
+        .unwrap_or_else(|message| {
+            let key = message.split(' ').next().unwrap_or_default();
+            c.bad_at(format!("guidance.{key}"), at("guidance"), message);
+            None
+        });
     let (calibration, frame_id) = raw.camera.unwrap_or_default().validate(c);
     let (mut pipeline, workers) = raw
         .pipeline
@@ -226,6 +239,7 @@ fn compose(raw: RawConfig, tables: Option<&Table>, c: &mut Check) -> Config {
         log_level,
         detector,
         ros2,
+        guidance,
     }
 }
 
@@ -425,6 +439,24 @@ mod tests {
         // Without [gige], the camera's defaults (first camera found, BayerRG8).
         let cfg = Config::parse("[source]\nkind = \"camera\"\n", "t.toml").unwrap();
         assert_eq!(cfg.source, SourceConfig::Camera(GigeConfig::default()));
+    }
+
+    #[test]
+    fn guidance_section() {
+        assert!(Config::default().guidance.is_some());
+        let cfg = Config::parse(
+            "[guidance]\nmode = \"over_row\"\nrow_spacing_m = 0.75\n",
+            "t.toml",
+        )
+        .unwrap();
+        assert_eq!(cfg.guidance.unwrap().row_spacing_m, Some(0.75));
+        let e = err("[log]\nlevel = \"info\"\n[guidance]\nmin_rows = 1\n");
+        assert_eq!(e.problems[0].key, "guidance.min_rows");
+        assert_eq!(e.problems[0].line, 3);
+        assert!(Config::parse("[guidance]\nenabled = false\n", "t.toml")
+            .unwrap()
+            .guidance
+            .is_none());
     }
 
     #[test]

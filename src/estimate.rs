@@ -10,7 +10,7 @@
 
 use crate::detect::{Detection, Method};
 use crate::frame::Frame;
-use crate::guidance::GuidanceEstimate;
+use crate::guidance::{Guidance, GuidanceEstimate};
 use serde::{Deserialize, Serialize};
 
 /// The version of the [`Estimate`] JSON schema. Bumped on any incompatible change.
@@ -204,6 +204,23 @@ impl Estimate {
             truth: None,
             guidance: None,
         }
+    }
+
+    /// Runs row guidance on this estimate (frames in capture order): a frame with status
+    /// `ok` measures, any other only advances the tracker (nothing claims to be a row).
+    pub fn apply_guidance(&mut self, guidance: &mut Guidance) {
+        let vp = match self.status {
+            Status::Ok => self.vanishing_point,
+            _ => None,
+        };
+        let mut out = self.guidance.take().unwrap_or_default();
+        guidance.update(
+            self.capture_ns,
+            vp,
+            self.rows.iter().map(|r| r.normal),
+            &mut out,
+        );
+        self.guidance = Some(out);
     }
 
     /// Sets the publish time and the end-to-end latency.

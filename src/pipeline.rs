@@ -25,6 +25,7 @@ use crate::detect::Detection;
 use crate::estimate::{Estimate, Status};
 use crate::frame::{now_ns, Frame, ImageView};
 use crate::gige::Recycler;
+use crate::guidance::Guidance;
 use crate::publish::Publisher;
 use crate::record::{RecordState, Recorder};
 use crate::source::{Poll, Source, SourceState};
@@ -65,6 +66,8 @@ pub struct PipelineOptions {
     pub status_interval: Duration,
     /// How long the source waits for a frame before it checks for stop (and reports its state).
     pub poll_timeout: Duration,
+    /// Row guidance, run by the publisher on each estimate in frame order.
+    pub guidance: Option<Guidance>,
 }
 
 impl Default for PipelineOptions {
@@ -78,6 +81,7 @@ impl Default for PipelineOptions {
             max_duration: None,
             status_interval: Duration::from_secs(1),
             poll_timeout: Duration::from_millis(50),
+            guidance: None,
         }
     }
 }
@@ -310,7 +314,8 @@ impl Pipeline {
 
         // Estimate queue → publisher, in ticket order → publishers, recorder, latest frame.
         let order = Reorder::new(opts.estimate_queue + 2 * workers + 2);
-        let out = Outlet::new(publishers, record, release);
+        let mut out = Outlet::new(publishers, record, release);
+        out.guidance = opts.guidance.clone();
         let status_interval = opts.status_interval;
         threads.spawn("publisher", move |hb| {
             run_publisher(hb, done_rx, order, out, status_interval)
@@ -698,12 +703,14 @@ impl Reorder {
 }
 
 /// Where the publisher thread puts each released estimate: the publishers, the recorder and
-/// the latest-frame slot (whose previous frame goes back to the source).
+/// the latest-frame slot (whose previous frame goes back to the source), after row guidance
+/// (when configured) has folded it in, in frame order.
 struct Outlet {
     publishers: Vec<Box<dyn Publisher>>,
     record: Option<Queue<RecordItem>>,
     release: Release,
     last_seq: u64,
+    guidance: Option<Guidance>,
 }
 
 impl Outlet {
@@ -717,6 +724,7 @@ impl Outlet {
             record,
             release,
             last_seq: 0,
+            guidance: None,
         }
     }
 
@@ -727,6 +735,9 @@ impl Outlet {
             mut estimate,
             ..
         } = done;
+        if let Some(g) = self.guidance.as_mut() {
+            estimate.apply_guidance(g);
+        }
         estimate.stamp_published(now_ns());
         self.last_seq = estimate.seq;
         for p in self.publishers.iter_mut() {

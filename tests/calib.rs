@@ -304,6 +304,8 @@ fn example_calibration_is_valid_and_documented() {
         "roll_deg",
         "pitch_deg",
         "yaw_deg",
+        "height_m",
+        "position_m",
     ] {
         let line = text
             .lines()

@@ -12,6 +12,7 @@ use crate::camera::{Calibration, IdealLens};
 use crate::config::Config;
 use crate::detect::{Detection, Detector};
 use crate::frame::ImageView;
+use crate::guidance::Guidance;
 use crate::notify::Notifier;
 use crate::pipeline::{Pipeline, Processor};
 use crate::publish::http::{HttpServer, OverlayFn};
@@ -244,6 +245,10 @@ pub fn run(args: RunArgs, record_to: Option<PathBuf>) -> anyhow::Result<ExitCode
     };
     if let Some(rec) = cfg.record.as_mut() {
         rec.calibration_toml = Some(cal.to_toml());
+    }
+    if let Some(g) = cfg.guidance {
+        cfg.pipeline.guidance =
+            Some(Guidance::new(g, cal.mounting).context("[guidance] (docs/guidance.md)")?);
     }
 
     // Detector workers.

@@ -11,10 +11,12 @@
 //! Buffers are kept between frames: an update allocates nothing once warmed up.
 
 pub mod comb;
+pub mod config;
 pub mod ground;
 pub mod tracker;
 
 pub use comb::{fit_comb, fit_comb_with_roll, Comb, CombOptions};
+pub use config::GuidanceConfig;
 pub use ground::GroundFrame;
 pub use tracker::{Measurement, TrackState, Tracked, Tracker, TrackerOptions};
 
@@ -81,7 +83,7 @@ impl Default for GuidanceOptions {
             max_roll_deg: 5.0,
             min_rows: 2,
             row_sd_m: 0.003,
-            heading_sd_rad: 0.002,
+            heading_sd_rad: 0.1f64.to_radians(),
             spacing_tolerance: 0.04,
             tracker: TrackerOptions::default(),
         }
@@ -270,7 +272,7 @@ impl Default for GuidanceEstimate {
 }
 
 /// Running statistics behind the configuration warnings.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone, Default, PartialEq)]
 struct Consistency {
     /// Exponentially weighted sums for the regression of the measured spacing on the offset.
     n: f64,
@@ -319,7 +321,7 @@ impl Consistency {
 }
 
 /// Row guidance for one camera: per-frame ground geometry and the tracker.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct Guidance {
     opts: GuidanceOptions,
     mounting: Mounting,

@@ -33,9 +33,15 @@ pub struct SyntheticDriveOptions {
     pub pitch_amplitude_deg: f64,
     pub offset_amplitude_m: f64,
     pub period_s: f64,
+    /// When positive: at this time, seconds, the robot crosses to the next inter-row path on
+    /// its left (one spacing, over [`CROSSING_S`]), its yaw following its sideways motion.
+    pub cross_at_s: f64,
     /// Render threads (0: as many as the machine has).
     pub render_threads: usize,
 }
+
+/// How long the crossing to the next inter-row path takes, seconds.
+pub const CROSSING_S: f64 = 4.0;
 
 /// `[source.synthetic]` as written.
 #[derive(Debug, Default, Deserialize)]
@@ -52,6 +58,7 @@ pub(crate) struct RawSynthetic {
     pitch_amplitude_deg: Raw<f64>,
     offset_amplitude_m: Raw<f64>,
     period_s: Raw<f64>,
+    cross_at_s: Raw<f64>,
 }
 
 impl RawSynthetic {
@@ -105,18 +112,33 @@ impl RawSynthetic {
                 5.0,
             ),
             period_s: c.range("source.synthetic.period_s", &self.period_s, 20.0, 0.1, 1e6),
+            cross_at_s: c.range(
+                "source.synthetic.cross_at_s",
+                &self.cross_at_s,
+                0.0,
+                0.0,
+                1e6,
+            ),
             render_threads: 0,
         }
     }
 }
 
 /// The robot's pose relative to the rows at time `t` seconds: (yaw°, pitch°, lateral m,
-/// along m). Heading, pitch and offset are sinusoids with incommensurate phases.
+/// along m). Heading, pitch and offset are sinusoids with incommensurate phases; with
+/// `cross_at_s` the lateral position also steps by one spacing (a smoothstep over
+/// [`CROSSING_S`]) and the yaw turns with the sideways speed (atan(ẏ / v)).
 pub fn drive_pose(o: &SyntheticDriveOptions, spacing_m: f64, t: f64) -> (f64, f64, f64, f64) {
     let w = TAU / o.period_s;
-    let yaw = o.heading_amplitude_deg * (w * t).sin();
+    let mut yaw = o.heading_amplitude_deg * (w * t).sin();
     let pitch = o.pitch_amplitude_deg * (0.73 * w * t + 1.0).sin();
-    let lateral = spacing_m / 2.0 + o.offset_amplitude_m * (1.31 * w * t + 2.0).sin();
+    let mut lateral = spacing_m / 2.0 + o.offset_amplitude_m * (1.31 * w * t + 2.0).sin();
+    if o.cross_at_s > 0.0 {
+        let u = ((t - o.cross_at_s) / CROSSING_S).clamp(0.0, 1.0);
+        lateral += spacing_m * u * u * (3.0 - 2.0 * u);
+        let sideways = spacing_m * 6.0 * u * (1.0 - u) / CROSSING_S;
+        yaw += sideways.atan2(o.speed_mps.max(0.1)).to_degrees();
+    }
     (yaw, pitch, lateral, o.speed_mps * t)
 }
 
@@ -253,6 +275,7 @@ mod tests {
             pitch_amplitude_deg: 3.0,
             offset_amplitude_m: 0.1,
             period_s: 0.01,
+            cross_at_s: 0.0,
             render_threads: 1,
         }
     }
