@@ -64,7 +64,7 @@ fn eval_writes_tables_plots_and_outcomes() {
     }
     for lens in ["fisheye185", "pal"] {
         let png = image::open(out.join(format!("detection_rate_{lens}.png"))).unwrap();
-        assert_eq!((png.width(), png.height()), (640, 420));
+        assert_eq!((png.width(), png.height()), omnirow::eval::chart::SIZE);
     }
     let lines = outcomes(&out);
     // 2 Table I images + 3 distances x 2 lenses x 1 + 2 lenses x 1 Table II image, one method.
