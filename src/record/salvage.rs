@@ -341,7 +341,7 @@ impl<R: Read + Seek> Salvage<R> {
         let at = self.pos;
         let mut head = [0u8; FRAMING as usize];
         let got = self.read_at(at, &mut head)?;
-        if got < head.len() {
+        if got < head.len() || at + FRAMING > self.data_end {
             self.damaged(at, "a record cut off by the end of the file".into())?;
             return Ok(None);
         }
@@ -456,7 +456,7 @@ impl<R: Read + Seek> Salvage<R> {
         at: u64,
         len: u64,
     ) -> Result<Result<(usize, usize), String>, SalvageError> {
-        let room = self.data_end - at - FRAMING;
+        let room = self.data_end.saturating_sub(at + FRAMING);
         if len > room {
             return Ok(Err(format!(
                 "a chunk longer than the file allows ({len} bytes)"
