@@ -16,7 +16,7 @@ use omnirow::frame::{ImageView, PixelFormat};
 use std::time::Duration;
 
 fn frames() -> (omnirow::camera::Calibration, Vec<u8>, Vec<u8>) {
-    let cal = ideal_fisheye(2050, 2448);
+    let cal = ideal_fisheye(2050, 2448).unwrap();
     let r = common::render_rows(&cal, 0.15, 0.02, 4, 0.75, 0.06, 1.0, 0.2, 0.05, 42);
     let w = r.width as usize;
     let bayer = r

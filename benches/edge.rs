@@ -22,8 +22,8 @@ const H: usize = 2050;
 
 fn bench(c: &mut Criterion) {
     for (name, cal) in [
-        ("fisheye", ideal_fisheye(H as u32, W as u32)),
-        ("pal", ideal_pal(H as u32, W as u32)),
+        ("fisheye", ideal_fisheye(H as u32, W as u32).unwrap()),
+        ("pal", ideal_pal(H as u32, W as u32).unwrap()),
     ] {
         let (img, _) = render(&cal, &random_scene(7, Protocol::Table1), 7).unwrap();
         let view = ImageView::new(img.width, img.height, img.format, &img.data).unwrap();

@@ -9,8 +9,8 @@ fn bench(c: &mut Criterion) {
     let mut g = c.benchmark_group("synth_render_2448x2050");
     g.sample_size(10);
     for (lens, cal) in [
-        ("fisheye185", ideal_fisheye(2050, 2448)),
-        ("pal", ideal_pal(2050, 2448)),
+        ("fisheye185", ideal_fisheye(2050, 2448).unwrap()),
+        ("pal", ideal_pal(2050, 2448).unwrap()),
     ] {
         let mut renderer = Renderer::new(&cal).expect("ideal lens renders");
         for style in [Style::Grey, Style::Colour, Style::Bayer] {
@@ -31,7 +31,7 @@ fn bench(c: &mut Criterion) {
     g.finish();
     let mut g = c.benchmark_group("synth_setup_2448x2050");
     g.sample_size(10);
-    let cal = ideal_fisheye(2050, 2448);
+    let cal = ideal_fisheye(2050, 2448).unwrap();
     g.bench_function("renderer_new", |b| {
         b.iter(|| Renderer::new(&cal).expect("renderer"))
     });

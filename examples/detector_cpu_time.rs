@@ -30,8 +30,8 @@ fn main() {
     println!("| lens | method | median CPU ms | p90 CPU ms | prepare | hough | edge | vanishing |");
     println!("|---|---|---|---|---|---|---|---|");
     for (lens, cal) in [
-        ("fisheye", ideal_fisheye(2050, 2448)),
-        ("pal", ideal_pal(2050, 2448)),
+        ("fisheye", ideal_fisheye(2050, 2448).unwrap()),
+        ("pal", ideal_pal(2050, 2448).unwrap()),
     ] {
         let (img, _) = render(&cal, &random_scene(7, Protocol::Table1), 7).unwrap();
         let view = ImageView::new(img.width, img.height, img.format, &img.data).unwrap();

@@ -10,9 +10,9 @@ fn main() {
     let a: Vec<String> = std::env::args().collect();
     let (h, w) = (1025, 1224);
     let cal = if a.get(1).map(String::as_str) == Some("pal") {
-        ideal_pal(h, w)
+        ideal_pal(h, w).unwrap()
     } else {
-        ideal_fisheye(h, w)
+        ideal_fisheye(h, w).unwrap()
     };
     let seed: u64 = a.get(2).and_then(|s| s.parse().ok()).unwrap_or(1);
     let (img, truth) = render(&cal, &random_scene(seed, Protocol::Table1), seed).unwrap();

@@ -27,7 +27,10 @@ fn main() {
     println!("| lens | method | found | failures (>1° or none) | mean err mrad | max err mrad | median ms |");
     println!("|---|---|---|---|---|---|---|");
     let mut edge_lines = Vec::new();
-    for (lens, cal) in [("fisheye", ideal_fisheye(h, w)), ("pal", ideal_pal(h, w))] {
+    for (lens, cal) in [
+        ("fisheye", ideal_fisheye(h, w).unwrap()),
+        ("pal", ideal_pal(h, w).unwrap()),
+    ] {
         let mut dets: Vec<(Method, Detector)> = [Method::Hough, Method::Edge, Method::Combined]
             .into_iter()
             .map(|m| {

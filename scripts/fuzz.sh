@@ -63,6 +63,7 @@ if d=$(seed_dir detect_image); then
     "$omnirow" synth --lens fisheye185 --image-height 72 --image-width 96 --seed 2 \
       --out "$d/synth.$ext" >/dev/null 2>&1 || rm -f "$d/synth.$ext"
   done
+  cp tests/data/fuzz/detect_image-*.png "$d"/  # what the fuzzer found before
 fi
 
 (cd fuzz && cargo fuzz build -s "$SANITIZER") || {

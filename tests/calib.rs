@@ -286,6 +286,18 @@ fn shipped_calibrations_are_what_the_generator_writes() {
 }
 
 #[test]
+fn ideal_lens_for_a_size_it_cannot_fit_is_an_error() {
+    let out = bin()
+        .args(["calib", "ideal", "pal", "--height", "4", "--width", "96"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("96x4") && err.contains("16..=20000"), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+}
+
+#[test]
 fn example_calibration_is_valid_and_documented() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let example = Calibration::load(&root.join("config/calibration.example.toml")).unwrap();

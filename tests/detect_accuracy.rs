@@ -127,8 +127,8 @@ fn real_calibration(file: &str) -> Option<Calibration> {
 #[test]
 fn table1_quick_ideal_lenses() {
     for (name, cal) in [
-        ("fisheye", ideal_fisheye(1024, 1224)),
-        ("pal", ideal_pal(1024, 1224)),
+        ("fisheye", ideal_fisheye(1024, 1224).unwrap()),
+        ("pal", ideal_pal(1024, 1224).unwrap()),
     ] {
         let outs = run_protocol(&cal, Style::Grey, 1, 6);
         let s = summarise(&outs);
@@ -143,7 +143,7 @@ fn table1_quick_ideal_lenses() {
 /// Quick guard on colour and Bayer input (vegetation index, half-resolution quads).
 #[test]
 fn table1_quick_colour_and_bayer() {
-    let cal = ideal_fisheye(1024, 1224);
+    let cal = ideal_fisheye(1024, 1224).unwrap();
     for style in [Style::Colour, Style::Bayer] {
         let outs = run_protocol(&cal, style, 20, 3);
         let s = summarise(&outs);
@@ -186,8 +186,11 @@ fn table1_full_protocol() {
         .unwrap_or(60);
     let mut all = Vec::new();
     for (name, cal) in [
-        ("ideal fisheye 185 2448x2050", ideal_fisheye(2050, 2448)),
-        ("ideal PAL 2448x2050", ideal_pal(2050, 2448)),
+        (
+            "ideal fisheye 185 2448x2050",
+            ideal_fisheye(2050, 2448).unwrap(),
+        ),
+        ("ideal PAL 2448x2050", ideal_pal(2050, 2448).unwrap()),
     ] {
         let outs = run_protocol(&cal, Style::Grey, 1000, n);
         report(name, &summarise(&outs));
@@ -230,8 +233,8 @@ fn table1_row_errors() {
         .and_then(|v| v.parse().ok())
         .unwrap_or(10);
     for (name, cal) in [
-        ("fisheye", ideal_fisheye(2050, 2448)),
-        ("pal", ideal_pal(2050, 2448)),
+        ("fisheye", ideal_fisheye(2050, 2448).unwrap()),
+        ("pal", ideal_pal(2050, 2448).unwrap()),
     ] {
         let mut renderer = Renderer::new(&cal).unwrap();
         let opts: DetectorOptions = match std::env::var("OMNIROW_DETECT_OPTS") {

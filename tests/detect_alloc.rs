@@ -35,7 +35,7 @@ static GLOBAL: Counting = Counting;
 
 #[test]
 fn process_allocates_nothing_after_warm_up() {
-    let cal = ideal_fisheye(400, 480);
+    let cal = ideal_fisheye(400, 480).unwrap();
     let frames: Vec<_> = (0..4)
         .map(|i| {
             common::render_rows(

@@ -55,7 +55,7 @@ fn write_calib(dir: &Path, cal: &Calibration, name: &str) -> PathBuf {
 #[test]
 fn contract_fields_order_errors_and_rescaling() {
     let dir = tmpdir("contract");
-    let cal = ideal_fisheye(512, 612);
+    let cal = ideal_fisheye(512, 612).unwrap();
     let calib = write_calib(&dir, &cal, "fisheye.toml");
     let a = render_rows(&cal, 0.2, 0.03, 3, 0.75, 0.05, 1.0, 0.2, 0.01, 1);
     let pa = dir.join("a.png");
@@ -180,7 +180,7 @@ fn contract_fields_order_errors_and_rescaling() {
 #[test]
 fn pal_lens_mask_radius_override_and_methods() {
     let dir = tmpdir("pal");
-    let cal = ideal_pal(512, 612);
+    let cal = ideal_pal(512, 612).unwrap();
     let mut no_mask = cal.clone();
     no_mask.mask = None;
     let calib = write_calib(&dir, &no_mask, "pal-nomask.toml");

@@ -76,7 +76,7 @@ fn frame(cal: &Calibration) -> (Vec<u8>, Vec<u8>) {
 #[test]
 fn second_run_allocates_nothing() {
     let (w, h) = (640usize, 512usize);
-    let cal = ideal_fisheye(h as u32, w as u32);
+    let cal = ideal_fisheye(h as u32, w as u32).unwrap();
     let (img, mask) = frame(&cal);
     let mut edges = vec![0u8; w * h];
 

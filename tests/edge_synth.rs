@@ -103,12 +103,12 @@ fn check_lens(name: &str, cal: Calibration, seed: u64) {
 
 #[test]
 fn fisheye_rows_and_vanishing_point() {
-    check_lens("fisheye", ideal_fisheye(512, 612), 11);
+    check_lens("fisheye", ideal_fisheye(512, 612).unwrap(), 11);
 }
 
 #[test]
 fn pal_rows_and_vanishing_point() {
-    check_lens("pal", ideal_pal(512, 612), 12);
+    check_lens("pal", ideal_pal(512, 612).unwrap(), 12);
 }
 
 /// Table I protocol (paper IV-A), fixed seeds, on full 2448×2050 GC2450C frames (binned by the
@@ -122,8 +122,8 @@ fn pal_rows_and_vanishing_point() {
 #[test]
 fn table1_quick_edge_and_combined() {
     for (name, cal) in [
-        ("fisheye", ideal_fisheye(2050, 2448)),
-        ("pal", ideal_pal(2050, 2448)),
+        ("fisheye", ideal_fisheye(2050, 2448).unwrap()),
+        ("pal", ideal_pal(2050, 2448).unwrap()),
     ] {
         let mut errs = [Vec::new(), Vec::new(), Vec::new()];
         let methods = [Method::Hough, Method::Edge, Method::Combined];
@@ -168,8 +168,8 @@ fn table2_quick_combined_fails_least() {
     let methods = [Method::Hough, Method::Edge, Method::Combined];
     let mut sums = [0usize; 3];
     for (name, cal) in [
-        ("fisheye", ideal_fisheye(1025, 1224)),
-        ("pal", ideal_pal(1025, 1224)),
+        ("fisheye", ideal_fisheye(1025, 1224).unwrap()),
+        ("pal", ideal_pal(1025, 1224).unwrap()),
     ] {
         let mut dets: Vec<Detector> = methods
             .iter()

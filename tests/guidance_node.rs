@@ -73,7 +73,7 @@ fn published_offset_and_heading_match_the_drive_truth() {
 fn wrong_camera_height_is_reported_with_the_likely_height() {
     // the drive's camera is 1 m high; the calibration says 1.25 m, the field 0.5 m rows
     let dir = tmpdir("height");
-    let cal = omnirow::camera::ideal_fisheye(342, 408);
+    let cal = omnirow::camera::ideal_fisheye(342, 408).unwrap();
     let text = cal.to_toml().replace("height_m = 1.0", "height_m = 1.25");
     let cal_path = dir.join("cal.toml");
     std::fs::write(&cal_path, text).unwrap();
@@ -110,7 +110,7 @@ fn guidance_and_mounting_mistakes_are_named() {
     let text = String::from_utf8_lossy(&out.stderr) + String::from_utf8_lossy(&out.stdout);
     assert!(text.contains("guidance.min_rows"), "{text}");
 
-    let cal = omnirow::camera::ideal_fisheye(342, 408);
+    let cal = omnirow::camera::ideal_fisheye(342, 408).unwrap();
     let cal_path = dir.join("cal.toml");
     std::fs::write(
         &cal_path,

@@ -46,6 +46,7 @@ fn recording(dir: &Path) -> PathBuf {
         calibration_toml: Some(
             omnirow::camera::IdealLens::Fisheye185
                 .calibration(24, 32)
+                .unwrap()
                 .to_toml(),
         ),
         ..RecordOptions::default()

@@ -65,7 +65,7 @@ fn fixture(name: &str) -> Fixture {
     let mut rec = Recorder::new(RecordOptions {
         dir: dir.join("rec"),
         reserve_bytes: 0,
-        calibration_toml: Some(IdealLens::Fisheye185.calibration(48, 64).to_toml()),
+        calibration_toml: Some(IdealLens::Fisheye185.calibration(48, 64).unwrap().to_toml()),
         ..RecordOptions::default()
     })
     .unwrap();

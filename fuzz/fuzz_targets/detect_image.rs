@@ -27,7 +27,8 @@ fn detect(width: u32, height: u32, format: PixelFormat, data: &[u8]) {
             d.clear();
         }
         let det = d.entry((width, height)).or_insert_with(|| {
-            let cal = IdealLens::Fisheye185.calibration(height, width);
+            // Sizes no ideal lens fits (a side under 16 px) are refused with an error.
+            let cal = IdealLens::Fisheye185.calibration(height, width).ok()?;
             Detector::new(&cal, DetectorOptions::default()).ok()
         });
         if let Some(det) = det {
@@ -53,7 +54,7 @@ fuzz_target!(|data: &[u8]| {
     }
     // Raw greyscale: the first two bytes give the size, the rest the pixels.
     if data.len() >= 2 {
-        let (w, h) = (u32::from(data[0] % 96) + 8, u32::from(data[1] % 96) + 8);
+        let (w, h) = (u32::from(data[0] % 96) + 16, u32::from(data[1] % 96) + 16);
         let mut px = data[2..].to_vec();
         px.resize((w * h) as usize, 0);
         detect(w, h, PixelFormat::Mono8, &px);

@@ -4,7 +4,12 @@
 //! 185° fisheye (angle from the axis proportional to the radius) and a panoramic annular lens
 //! seeing 30°–100° from the axis. Both are deterministic functions of the image size.
 
-use super::{Calibration, FovMask, Mounting, OcamModel};
+use super::{CalibError, Calibration, FovMask, Mounting, OcamModel};
+use std::ops::RangeInclusive;
+
+/// Image sides (pixels) an ideal lens can be made for: below 16 px the image circle has no
+/// room for the fitted polynomials; above 20000 px no sensor exists.
+pub const IDEAL_SIDE_PX: RangeInclusive<u32> = 16..=20000;
 
 /// The ideal lenses omnirow ships (in configuration files: `fisheye185`, `pal`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize)]
@@ -17,7 +22,9 @@ pub enum IdealLens {
 }
 
 impl IdealLens {
-    pub fn calibration(self, height: u32, width: u32) -> Calibration {
+    /// The lens's calibration for an image of `height` × `width` pixels; an error names the
+    /// size when a side is outside [`IDEAL_SIDE_PX`].
+    pub fn calibration(self, height: u32, width: u32) -> Result<Calibration, CalibError> {
         match self {
             IdealLens::Fisheye185 => ideal_fisheye(height, width),
             IdealLens::Pal => ideal_pal(height, width),
@@ -72,6 +79,21 @@ pub(super) fn fit_direct(alpha: impl Fn(f64) -> f64, rho_max: f64, degree: usize
     ss
 }
 
+/// Refuses image sizes the ideal lenses cannot be fitted to.
+fn check_size(lens: &str, height: u32, width: u32) -> Result<(), CalibError> {
+    if IDEAL_SIDE_PX.contains(&height) && IDEAL_SIDE_PX.contains(&width) {
+        return Ok(());
+    }
+    Err(CalibError::Invalid {
+        path: format!("ideal {lens} lens").into(),
+        problem: format!(
+            "image {width}x{height}: each side must be {}..={} pixels",
+            IDEAL_SIDE_PX.start(),
+            IDEAL_SIDE_PX.end()
+        ),
+    })
+}
+
 fn finish(ss: Vec<f64>, fit_rho: f64, height: u32, width: u32, mask: FovMask) -> Calibration {
     let centre = ((height as f64 - 1.0) / 2.0, (width as f64 - 1.0) / 2.0);
     // A first model with a placeholder inverse gives the valid range; then fit the inverse.
@@ -94,12 +116,14 @@ fn finish(ss: Vec<f64>, fit_rho: f64, height: u32, width: u32, mask: FovMask) ->
 }
 
 /// An equidistant 185° fisheye whose image circle (radius at 92.5°) fits the sensor's height.
-pub fn ideal_fisheye(height: u32, width: u32) -> Calibration {
+/// An error when a side is outside [`IDEAL_SIDE_PX`].
+pub fn ideal_fisheye(height: u32, width: u32) -> Result<Calibration, CalibError> {
+    check_size("fisheye185", height, width)?;
     let rim = (height.min(width) as f64 - 1.0) / 2.0 - 2.0;
     let half_fov = 92.5f64.to_radians();
     let k = half_fov / rim; // radians per pixel
     let ss = fit_direct(|rho| k * rho, rim * 1.08, 7);
-    finish(
+    Ok(finish(
         ss,
         rim * 1.08,
         height,
@@ -108,12 +132,14 @@ pub fn ideal_fisheye(height: u32, width: u32) -> Calibration {
             inner_radius_px: 0.0,
             outer_radius_px: rim,
         },
-    )
+    ))
 }
 
 /// A panoramic annular lens seeing from 30° to 100° off the axis (10° above the horizon),
 /// the outer rim fitting the sensor's height, the inner blind disc at a third of it.
-pub fn ideal_pal(height: u32, width: u32) -> Calibration {
+/// An error when a side is outside [`IDEAL_SIDE_PX`].
+pub fn ideal_pal(height: u32, width: u32) -> Result<Calibration, CalibError> {
+    check_size("pal", height, width)?;
     let rim = (height.min(width) as f64 - 1.0) / 2.0 - 2.0;
     let inner = rim / 3.1;
     let (a_in, a_out) = (30f64.to_radians(), 100f64.to_radians());
@@ -122,7 +148,7 @@ pub fn ideal_pal(height: u32, width: u32) -> Calibration {
     let p = (a_in - q * inner * inner) / inner;
     debug_assert!(p > 0.0);
     let ss = fit_direct(|rho| p * rho + q * rho * rho, rim * 1.05, 7);
-    finish(
+    Ok(finish(
         ss,
         rim * 1.05,
         height,
@@ -131,7 +157,7 @@ pub fn ideal_pal(height: u32, width: u32) -> Calibration {
             inner_radius_px: inner,
             outer_radius_px: rim,
         },
-    )
+    ))
 }
 
 #[cfg(test)]
@@ -140,7 +166,7 @@ mod tests {
 
     #[test]
     fn fisheye_angles() {
-        let cal = ideal_fisheye(2050, 2448);
+        let cal = ideal_fisheye(2050, 2448).unwrap();
         let rim = cal.mask.unwrap().outer_radius_px;
         let a = cal.model.angle_at_radius(rim).to_degrees();
         assert!((a - 92.5).abs() < 0.3, "{a}");
@@ -152,7 +178,7 @@ mod tests {
 
     #[test]
     fn pal_angles() {
-        let cal = ideal_pal(2050, 2448);
+        let cal = ideal_pal(2050, 2448).unwrap();
         let m = cal.mask.unwrap();
         let a = cal.model.angle_at_radius(m.inner_radius_px).to_degrees();
         assert!((a - 30.0).abs() < 0.5, "{a}");
@@ -160,5 +186,23 @@ mod tests {
         assert!((a - 100.0).abs() < 0.5, "{a}");
         let (worst, _) = cal.worst_round_trip_px(16);
         assert!(worst < 0.01, "{worst}");
+    }
+
+    /// Every size in the range gives a model whose rays round-trip; every size outside it is
+    /// an error naming the size (a 96x4 PNG through `detect` once panicked here).
+    #[test]
+    fn sizes_inside_the_range_fit_and_outside_are_refused() {
+        for lens in [IdealLens::Fisheye185, IdealLens::Pal] {
+            for (h, w) in [(16, 16), (16, 97), (17, 40), (40, 17), (33, 33), (64, 301)] {
+                let cal = lens.calibration(h, w).unwrap();
+                let (worst, _) = cal.worst_round_trip_px(8);
+                assert!(worst < 0.05, "{} {w}x{h}: {worst}", lens.name());
+            }
+            for (h, w) in [(4, 96), (0, 0), (15, 200), (200, 15), (20_001, 64)] {
+                let err = lens.calibration(h, w).unwrap_err().to_string();
+                assert!(err.contains(&format!("{w}x{h}")), "{err}");
+                assert!(err.contains("16..=20000"), "{err}");
+            }
+        }
     }
 }

@@ -12,7 +12,7 @@ mod ideal;
 mod ocam;
 mod pinhole;
 
-pub use ideal::{ideal_fisheye, ideal_pal, IdealLens};
+pub use ideal::{ideal_fisheye, ideal_pal, IdealLens, IDEAL_SIDE_PX};
 pub use ocam::{CalibError, OcamModel};
 pub use pinhole::{ConversionError, DistortionModel, Pinhole, PinholeToml};
 
@@ -410,7 +410,7 @@ mod tests {
 
     #[test]
     fn toml_round_trip_and_errors() {
-        let cal = ideal_fisheye(2050, 2448);
+        let cal = ideal_fisheye(2050, 2448).unwrap();
         let text = cal.to_toml();
         let back = Calibration::parse_toml(&text, Path::new("c.toml")).unwrap();
         assert_eq!(back.model.ss, cal.model.ss);
@@ -429,7 +429,7 @@ mod tests {
 
     #[test]
     fn mounting_height_and_position_keys() {
-        let cal = ideal_fisheye(2050, 2448);
+        let cal = ideal_fisheye(2050, 2448).unwrap();
         let text = cal.to_toml();
         assert!(text.contains("height_m = 1.0"), "{text}");
         let back = Calibration::parse_toml(&text, Path::new("c.toml")).unwrap();
@@ -462,7 +462,7 @@ mod tests {
 
     #[test]
     fn fov_test_for_rays() {
-        let cal = ideal_fisheye(2050, 2448);
+        let cal = ideal_fisheye(2050, 2448).unwrap();
         assert!(cal.ray_in_fov(&Vector3::new(0.0, 0.0, -1.0)));
         assert!(!cal.ray_in_fov(&Vector3::new(0.0, 0.0, 1.0)));
         // 91 degrees off axis is inside a 185 degree fisheye
@@ -470,7 +470,7 @@ mod tests {
         assert!(cal.ray_in_fov(&Vector3::new(a.sin(), 0.0, -a.cos())));
         let a = 95f64.to_radians();
         assert!(!cal.ray_in_fov(&Vector3::new(a.sin(), 0.0, -a.cos())));
-        let pal = ideal_pal(2050, 2448);
+        let pal = ideal_pal(2050, 2448).unwrap();
         let a = 10f64.to_radians();
         assert!(!pal.ray_in_fov(&Vector3::new(a.sin(), 0.0, -a.cos())));
         let a = 60f64.to_radians();
@@ -479,7 +479,7 @@ mod tests {
 
     #[test]
     fn rescale_to_half() {
-        let cal = ideal_pal(2050, 2448);
+        let cal = ideal_pal(2050, 2448).unwrap();
         let half = cal.rescaled_to(1025, 1224).unwrap();
         assert_eq!(half.size(), (1025, 1224));
         let m = half.mask.unwrap();

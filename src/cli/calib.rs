@@ -107,7 +107,7 @@ pub fn run(cmd: CalibCommand) -> anyhow::Result<ExitCode> {
             width,
             format,
         } => {
-            let cal = IdealLens::from(lens).calibration(height, width);
+            let cal = IdealLens::from(lens).calibration(height, width)?;
             let text = match format {
                 Format::Toml => cal.to_toml(),
                 Format::Ocamcalib => cal.model.to_ocamcalib_text(),

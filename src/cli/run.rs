@@ -229,7 +229,7 @@ pub fn run(args: RunArgs, record_to: Option<PathBuf>) -> anyhow::Result<ExitCode
     };
     let cal = match &cfg.calibration {
         CalibrationChoice::File(p) => Calibration::load(p)?,
-        CalibrationChoice::Ideal(l) => l.calibration(2050, 2448),
+        CalibrationChoice::Ideal(l) => l.calibration(2050, 2448)?,
         CalibrationChoice::Auto => match source.calibration() {
             Some(c) => c.clone(),
             None => {
@@ -239,7 +239,11 @@ pub fn run(args: RunArgs, record_to: Option<PathBuf>) -> anyhow::Result<ExitCode
                     _ => (2050, 2448),
                 };
                 tracing::warn!("no calibration configured or recorded: using the ideal 185° fisheye at {w}x{h} (camera.calibration)");
-                IdealLens::Fisheye185.calibration(h, w)
+                IdealLens::Fisheye185.calibration(h, w).map_err(|e| {
+                    anyhow::anyhow!(
+                        "camera.calibration: no calibration for the {w}x{h} frames: {e}"
+                    )
+                })?
             }
         },
     };

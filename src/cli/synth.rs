@@ -117,10 +117,10 @@ pub fn run(args: SynthArgs) -> anyhow::Result<ExitCode> {
         None => {
             let lens = IdealLens::from(args.lens.unwrap_or(LensArg::Fisheye185));
             let (h, w) = (args.image_height, args.image_width);
-            if !(16..=20_000).contains(&h) || !(16..=20_000).contains(&w) {
-                bail!("--image-height {h} --image-width {w}: each must be 16..=20000 pixels");
-            }
-            (lens.calibration(h, w), lens.name().to_string())
+            let cal = lens
+                .calibration(h, w)
+                .map_err(|e| anyhow::anyhow!("--image-height {h} --image-width {w}: {e}"))?;
+            (cal, lens.name().to_string())
         }
     };
     let cal = if args.scale != 1.0 {

@@ -1104,7 +1104,7 @@ mod tests {
     #[test]
     fn combined_is_default_and_weight_is_checked() {
         assert_eq!(DetectorOptions::default().method, Method::Combined);
-        let cal = ideal_fisheye(100, 120);
+        let cal = ideal_fisheye(100, 120).unwrap();
         for w in [0.0, 1.0, -0.5, f64::NAN] {
             let e = Detector::new(
                 &cal,
@@ -1143,7 +1143,7 @@ mod tests {
 
     #[test]
     fn rejects_images_not_a_uniform_scale_of_the_calibration() {
-        let cal = ideal_fisheye(100, 120);
+        let cal = ideal_fisheye(100, 120).unwrap();
         let mut d = Detector::new(&cal, DetectorOptions::default()).unwrap();
         let data = vec![0u8; 100 * 100];
         let v = ImageView::new(100, 100, PixelFormat::Mono8, &data).unwrap();

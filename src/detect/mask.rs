@@ -315,7 +315,7 @@ mod tests {
 
     #[test]
     fn mask_follows_fov_and_sky() {
-        let cal = ideal_pal(100, 120);
+        let cal = ideal_pal(100, 120).unwrap();
         let mut mask = Vec::new();
         let mut rays = Vec::new();
         let mut solid = Vec::new();
@@ -374,7 +374,7 @@ mod tests {
 
     #[test]
     fn user_mask_removes_pixels() {
-        let cal = ideal_fisheye(60, 80);
+        let cal = ideal_fisheye(60, 80).unwrap();
         let mut user = GreyImage::default();
         user.resize(40, 30);
         user.data.fill(255);

@@ -127,7 +127,7 @@ mod tests {
 
     #[test]
     fn draws_rows_and_vp() {
-        let cal = ideal_fisheye(120, 160);
+        let cal = ideal_fisheye(120, 160).unwrap();
         let data = vec![100u8; 120 * 160];
         let view = ImageView::new(160, 120, PixelFormat::Mono8, &data).unwrap();
         let det = Detection {

@@ -568,7 +568,7 @@ mod tests {
     #[test]
     fn refit_finds_the_intensity_centre_of_an_antialiased_row() {
         // A row drawn with sub-pixel precision (coverage-weighted edges) in an ideal fisheye.
-        let cal = ideal_fisheye(200, 240);
+        let cal = ideal_fisheye(200, 240).unwrap();
         let (mut mask, mut rays, mut solid) = (Vec::new(), Vec::new(), Vec::new());
         build_mask(
             &cal,

@@ -136,8 +136,8 @@ mod tests {
     #[test]
     fn resolution_scales_with_the_image() {
         let opts = DetectorOptions::default();
-        let big = ideal_fisheye(1200, 1200);
-        let small = ideal_fisheye(300, 300);
+        let big = ideal_fisheye(1200, 1200).unwrap();
+        let small = ideal_fisheye(300, 300).unwrap();
         let (a, b) = (
             angular_resolution(&big, &opts).unwrap(),
             angular_resolution(&small, &opts).unwrap(),
@@ -153,7 +153,7 @@ mod tests {
     #[test]
     fn binning_halves_the_resolution() {
         let opts = DetectorOptions::default();
-        let cal = ideal_fisheye(2050, 2448);
+        let cal = ideal_fisheye(2050, 2448).unwrap();
         let a = angular_resolution(&cal, &opts).unwrap();
         assert_eq!((a.factor, a.width, a.height), (2, 1224, 1025));
         let off = DetectorOptions {

@@ -47,7 +47,9 @@ impl Lens {
             .into_iter()
             .map(|l| Lens {
                 name: l.name().to_string(),
-                calibration: l.calibration(2050, 2448),
+                calibration: l
+                    .calibration(2050, 2448)
+                    .expect("the GC2450C's sensor is an ideal lens size"),
             })
             .collect()
     }

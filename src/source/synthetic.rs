@@ -158,7 +158,10 @@ pub struct SyntheticDrive {
 impl SyntheticDrive {
     /// Builds the renderer (heavy, once).
     pub fn new(opts: SyntheticDriveOptions) -> Result<Self, SynthError> {
-        let cal = opts.lens.calibration(opts.height, opts.width);
+        let cal = opts
+            .lens
+            .calibration(opts.height, opts.width)
+            .map_err(|e| SynthError::Calibration(e.to_string()))?;
         let mut renderer = Renderer::new(&cal)?;
         if opts.render_threads > 0 {
             renderer = renderer.with_threads(opts.render_threads);

@@ -548,7 +548,7 @@ mod tests {
     #[test]
     fn leafy_images_are_deterministic_colour_and_masked() {
         use crate::synth::{Renderer, Style, SynthOptions};
-        let cal = crate::camera::ideal_fisheye(128, 160);
+        let cal = crate::camera::ideal_fisheye(128, 160).unwrap();
         let opts = SynthOptions {
             style: Style::Leafy,
             weeds: 20,

@@ -110,7 +110,7 @@ mod tests {
 
     #[test]
     fn render_gives_an_image_in_the_style_format_and_its_truth() {
-        let cal = ideal_pal(128, 154);
+        let cal = ideal_pal(128, 154).unwrap();
         let opts = SynthOptions {
             style: Style::Bayer,
             yaw_deg: 5.0,

@@ -463,7 +463,7 @@ mod tests {
 
     #[test]
     fn deterministic_and_thread_count_independent() {
-        let cal = ideal_fisheye(256, 306);
+        let cal = ideal_fisheye(256, 306).unwrap();
         let opts = SynthOptions {
             noise: 0.2,
             weeds: 30,
@@ -487,8 +487,8 @@ mod tests {
     #[test]
     fn mask_is_black_and_pal_has_an_annulus() {
         for (cal, inner) in [
-            (ideal_fisheye(256, 306), false),
-            (ideal_pal(256, 306), true),
+            (ideal_fisheye(256, 306).unwrap(), false),
+            (ideal_pal(256, 306).unwrap(), true),
         ] {
             let img = render(&cal, &SynthOptions::default(), 1);
             let (h, w) = cal.size();
@@ -511,7 +511,7 @@ mod tests {
 
     #[test]
     fn background_noise_has_the_asked_density() {
-        let cal = ideal_fisheye(256, 306);
+        let cal = ideal_fisheye(256, 306).unwrap();
         for density in [0.1, 0.4] {
             let opts = SynthOptions {
                 noise: density,
@@ -538,7 +538,7 @@ mod tests {
 
     #[test]
     fn bayer_is_the_mosaic_of_the_colour_image() {
-        let cal = ideal_pal(256, 306);
+        let cal = ideal_pal(256, 306).unwrap();
         let colour = SynthOptions {
             style: Style::Colour,
             noise: 0.1,
@@ -568,7 +568,7 @@ mod tests {
     fn far_rows_are_anti_aliased() {
         // Looking along the rows near the horizon, pixels hold partial coverage (grey levels
         // between soil and plant), not just the two levels.
-        let cal = ideal_fisheye(512, 612);
+        let cal = ideal_fisheye(512, 612).unwrap();
         let opts = SynthOptions {
             plant_distance_m: 0.03,
             ..Default::default()
@@ -580,7 +580,7 @@ mod tests {
 
     #[test]
     fn wrong_buffer_size_is_an_error() {
-        let cal = ideal_fisheye(64, 80);
+        let cal = ideal_fisheye(64, 80).unwrap();
         let scene = Scene::new(&SynthOptions::default(), 1, &cal.mounting).unwrap();
         let mut r = Renderer::new(&cal).unwrap();
         let mut out = vec![0u8; 10];

@@ -163,8 +163,13 @@ mod tests {
 
     #[test]
     fn plant_centres_lie_on_the_listed_great_circles_and_are_rendered_bright() {
-        check_plants_on_rows(&ideal_fisheye(2050, 2448).rescaled(2.0).unwrap());
-        check_plants_on_rows(&crate::camera::ideal_pal(2050, 2448).rescaled(2.0).unwrap());
+        check_plants_on_rows(&ideal_fisheye(2050, 2448).unwrap().rescaled(2.0).unwrap());
+        check_plants_on_rows(
+            &crate::camera::ideal_pal(2050, 2448)
+                .unwrap()
+                .rescaled(2.0)
+                .unwrap(),
+        );
     }
 
     fn check_plants_on_rows(cal: &Calibration) {
@@ -222,7 +227,7 @@ mod tests {
 
     #[test]
     fn truth_is_deterministic_and_serialises() {
-        let cal = ideal_fisheye(512, 612);
+        let cal = ideal_fisheye(512, 612).unwrap();
         let opts = SynthOptions {
             yaw_deg: -20.0,
             across_sd_m: 0.01,
@@ -249,7 +254,7 @@ mod tests {
 
     #[test]
     fn the_rows_nearest_the_camera_are_listed_and_far_ones_are_not() {
-        let cal = ideal_fisheye(1025, 1224);
+        let cal = ideal_fisheye(1025, 1224).unwrap();
         let t = GroundTruth::of_scene(&scene(&SynthOptions::default(), &cal), &cal);
         for lat in [-0.25, 0.25, -0.75, 0.75, 2.25] {
             assert!(
@@ -271,7 +276,7 @@ mod tests {
             yaw in -45.0f64..45.0, pitch in -15.0f64..15.0, roll in -10.0f64..10.0,
             lateral in -1.0f64..1.0, height in 0.3f64..3.0,
         ) {
-            let cal = ideal_fisheye(256, 306);
+            let cal = ideal_fisheye(256, 306).unwrap();
             let opts = SynthOptions {
                 yaw_deg: yaw, pitch_deg: pitch, roll_deg: roll, lateral_m: lateral,
                 height_m: height, ..Default::default()

@@ -266,7 +266,7 @@ mod tests {
 
     #[test]
     fn line_traced_in_order_from_the_middle() {
-        let cal = ideal_fisheye(60, 80);
+        let cal = ideal_fisheye(60, 80).unwrap();
         let (w, h) = (80, 60);
         let mut edges = vec![0u8; w * h];
         // A staircase whose raster-first pixel is its top-left end, and a horizontal line.
@@ -295,7 +295,7 @@ mod tests {
 
     #[test]
     fn chain_starting_mid_way_is_joined_in_order() {
-        let cal = ideal_fisheye(40, 40);
+        let cal = ideal_fisheye(40, 40).unwrap();
         let (w, h) = (40, 40);
         let mut edges = vec![0u8; w * h];
         // An upside-down V: its raster-first pixel is the apex in the middle.
@@ -320,7 +320,7 @@ mod tests {
 
     #[test]
     fn junction_splits_and_short_chains_drop() {
-        let cal = ideal_fisheye(40, 40);
+        let cal = ideal_fisheye(40, 40).unwrap();
         let (w, h) = (40, 40);
         let mut edges = vec![0u8; w * h];
         for c in 2..38 {

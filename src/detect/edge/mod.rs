@@ -521,10 +521,10 @@ mod tests {
 
     #[test]
     fn pixel_angle_is_plausible() {
-        let f = pixel_angle(&ideal_fisheye(2050, 2448));
+        let f = pixel_angle(&ideal_fisheye(2050, 2448).unwrap());
         // 92.5 degrees over 1022 pixels radially, a little less tangentially.
         assert!((0.0012..0.0017).contains(&f), "{f}");
-        let p = pixel_angle(&ideal_pal(2050, 2448));
+        let p = pixel_angle(&ideal_pal(2050, 2448).unwrap());
         assert!((0.0010..0.0025).contains(&p), "{p}");
     }
 
@@ -559,7 +559,7 @@ mod tests {
 
     #[test]
     fn bands_give_two_boundaries_each() {
-        let cal = ideal_fisheye(300, 360);
+        let cal = ideal_fisheye(300, 360).unwrap();
         // Three rows along the direction (1, 0.2, -0.1); each is a band between two planes
         // through that direction, `half` either side of its centre plane.
         let along = Vector3::new(1.0, 0.2, -0.1).normalize();
@@ -630,7 +630,7 @@ mod tests {
 
     #[test]
     fn wrong_sizes_and_formats_are_errors() {
-        let cal = ideal_pal(100, 120);
+        let cal = ideal_pal(100, 120).unwrap();
         let mut det = EdgeDetector::new(&cal, 120, 100, EdgeOptions::default()).unwrap();
         let img = vec![0u8; 120 * 100];
         let mut rows = Vec::new();
@@ -651,7 +651,7 @@ mod tests {
         assert_eq!(half.calibration().size(), (25, 30));
         assert_eq!(half.working_size(), (30, 25, 2));
         // Sizes not a multiple of the factor leave the last partial block out.
-        let odd = EdgeDetector::new(&ideal_pal(101, 121), 121, 101, halve).unwrap();
+        let odd = EdgeDetector::new(&ideal_pal(101, 121).unwrap(), 121, 101, halve).unwrap();
         assert_eq!(odd.working_size(), (60, 50, 2));
         assert_eq!(odd.calibration().size(), (50, 60));
         let e = EdgeDetector::new(
