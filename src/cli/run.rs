@@ -285,7 +285,8 @@ pub fn run(args: RunArgs, record_to: Option<PathBuf>) -> anyhow::Result<ExitCode
     if print {
         publishers.push(Box::new(StdoutPublisher::new()));
     }
-    if let Some(p) = crate::ros2::node_publisher(&cfg.ros2, &source.describe())
+    let tool_point_m = cfg.guidance.map_or([0.0; 2], |g| g.tool_point_m);
+    if let Some(p) = crate::ros2::node_publisher(&cfg.ros2, &source.describe(), tool_point_m)
         .context("[ros2] publisher (docs/ros2.md)")?
     {
         tracing::info!(
