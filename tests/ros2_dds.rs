@@ -1028,7 +1028,10 @@ fn check_run_guidance(
         );
     }
     // The drive weaves ±10 cm: many frames are off the centre line by more than 3 cm.
-    assert!(signs >= 3, "only {signs} row_pose offsets away from the centre line");
+    assert!(
+        signs >= 3,
+        "only {signs} row_pose offsets away from the centre line"
+    );
     for m in &k["row_path"] {
         let (t, _, _) = tracked_of(m);
         check_row_path(m, &t, "test_base");
