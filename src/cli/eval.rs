@@ -56,11 +56,54 @@ pub struct EvalArgs {
 pub enum EvalCommand {
     /// Score the detector on real images with labelled crop rows (docs/real.md).
     Real(super::eval_real::RealArgs),
+    /// Score row guidance (offset, heading, curvature, end of rows, empty stretches) on
+    /// synthetic drives through the detector and the tracker (docs/guidance.md).
+    Guidance(GuidanceArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct GuidanceArgs {
+    /// Folder for README.md (the table) and the PNG plots.
+    #[arg(long, default_value = "eval-guidance")]
+    pub out: PathBuf,
+    /// Seconds per drive (15 frames a second).
+    #[arg(long, default_value_t = 20.0)]
+    pub seconds: f64,
+    /// Frame size (default: the GC2450C at half resolution).
+    #[arg(long, default_value_t = 1224)]
+    pub width: u32,
+    #[arg(long, default_value_t = 1024)]
+    pub height: u32,
+}
+
+/// `omnirow eval guidance`.
+fn guidance(a: GuidanceArgs) -> anyhow::Result<ExitCode> {
+    anyhow::ensure!(
+        a.seconds.is_finite() && a.seconds > 0.0 && a.seconds <= 3600.0,
+        "--seconds {} must be in (0, 3600]",
+        a.seconds
+    );
+    let detector = crate::detect::DetectorOptions::default();
+    let mut scores = Vec::new();
+    for s in eval::guidance::scenarios(a.width, a.height, a.seconds) {
+        eprintln!("eval guidance: {} ({} frames)", s.name, s.frames);
+        scores.push(eval::guidance::run_drive(&s, &detector)?);
+    }
+    let command: Vec<String> = std::env::args().collect();
+    let command = format!("omnirow {}", command[1..].join(" "));
+    let files = eval::guidance::write(&scores, &a.out, &command)?;
+    print!("{}", eval::guidance::markdown(&scores, &command));
+    for f in files {
+        eprintln!("eval: wrote {}", f.display());
+    }
+    Ok(ExitCode::SUCCESS)
 }
 
 pub fn run(a: EvalArgs) -> anyhow::Result<ExitCode> {
-    if let Some(EvalCommand::Real(r)) = a.command {
-        return super::eval_real::run(r);
+    match a.command {
+        Some(EvalCommand::Real(r)) => return super::eval_real::run(r),
+        Some(EvalCommand::Guidance(g)) => return guidance(g),
+        None => {}
     }
     let lenses = if a.lenses.is_empty() {
         Lens::builtin()

@@ -242,6 +242,30 @@ impl SyntheticDrive {
         &self.cal
     }
 
+    /// Frame `seq` of the drive (at `seq / fps` seconds, capture time counted from 0),
+    /// rendered now whatever the clock: for evaluations that run the drive as fast as they
+    /// can.
+    pub fn frame_at(&mut self, seq: u64) -> Result<Frame, SynthError> {
+        let t = seq as f64 / self.opts.fps;
+        let (data, truth) = self.render(t)?;
+        let (width, height) = self.renderer.size();
+        Ok(Frame {
+            seq,
+            capture_ns: (t * 1e9) as u64 + 1,
+            receive_ns: 0,
+            width,
+            height,
+            format: self.base.style.pixel_format(),
+            data,
+            truth: Some(Arc::new(truth)),
+        })
+    }
+
+    /// Hands a frame's buffer back for the next render.
+    pub fn recycle(&mut self, data: Vec<u8>) {
+        self.spare = data;
+    }
+
     fn render(&mut self, t: f64) -> Result<(Vec<u8>, GroundTruth), SynthError> {
         let (yaw, pitch, lateral, along) = drive_pose(&self.opts, self.base.row_spacing_m, t);
         let o = SynthOptions {
