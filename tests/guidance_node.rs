@@ -329,3 +329,43 @@ fn an_empty_stretch_claims_no_rows_and_the_rows_after_it_are_followed() {
     assert_eq!(end.crop, CropState::Rows);
     assert!(matches!(end.tracking, TrackState::Tracking));
 }
+
+#[test]
+fn eval_guidance_writes_its_table_and_plots() {
+    let dir = tmpdir("evalg");
+    let out = bin()
+        .args([
+            "eval",
+            "guidance",
+            "--seconds",
+            "0.4",
+            "--width",
+            "306",
+            "--height",
+            "256",
+            "--out",
+        ])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let table = String::from_utf8_lossy(&out.stdout);
+    for drive in ["weaving", "crossing", "curved_r20", "headland"] {
+        assert!(table.contains(&format!("| {drive} | 6 |")), "{table}");
+        assert!(dir.join(format!("guidance_{drive}.png")).is_file());
+    }
+    assert_eq!(
+        std::fs::read_to_string(dir.join("README.md")).unwrap(),
+        table
+    );
+    let bad = bin()
+        .args(["eval", "guidance", "--seconds", "0"])
+        .output()
+        .unwrap();
+    assert!(!bad.status.success());
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("--seconds"));
+}

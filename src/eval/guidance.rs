@@ -83,9 +83,11 @@ pub fn scenarios(width: u32, height: u32, seconds: f64) -> Vec<Scenario> {
         Scenario {
             name: "headland",
             drive: SyntheticDriveOptions {
+                // at 1 m/s: an empty stretch from 15% of the way (a quarter of it long, at
+                // most 6 m), the rows' end at 60%
                 rows_end_m: seconds * 0.6,
                 gap_start_m: seconds * 0.15,
-                gap_length_m: 6.0,
+                gap_length_m: (seconds * 0.25).min(6.0),
                 ..base
             },
             frames,
