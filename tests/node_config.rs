@@ -123,15 +123,15 @@ fn config_detector_shows_the_scales_of_a_calibration() {
             .unwrap_or_else(|| panic!("{text}"));
         (px, bins)
     };
-    // The Hough cell is derived from the angular resolution: about the same number of pixels
-    // through a lens with three times the focal length, so about 2.5 times the cells over
-    // the sphere (the wide lens's off-centre pixels are smaller angles, which raises its
-    // median resolution), and the GC2450C keeps its 90 cells of 2°.
+    // The Hough cell is a share of the field of view's extent: about the same number of
+    // pixels through a lens with three times the focal length, so about 2.5 times the cells
+    // over the sphere (the wide lens's 1.74 sr have an extent 2.4 times the narrow one's
+    // 0.30 sr), and the GC2450C keeps its 90 cells of 2°.
     let ((a, na), (b, nb)) = (
         scales("pinhole_512_f300.toml"),
         scales("pinhole_512_f900.toml"),
     );
-    assert!((b / a - 1.0).abs() < 0.1, "{a} px against {b} px");
+    assert!((b / a - 1.0).abs() < 0.2, "{a} px against {b} px");
     let r = nb as f64 / na as f64;
     assert!(r > 2.2 && r < 2.7, "{na} cells against {nb}");
     assert_eq!(scales("fisheye185_gc2450c.toml").1, 90);

@@ -50,9 +50,9 @@ pub struct DetectorOptions {
     pub max_tilt_deg: f64,
     /// The factor every angular option left absent is its reference value times (the
     /// Hough and vanishing cells, the refinement's, merge, inlier, spread and pairing
-    /// angles): absent, derived from the calibration's angular resolution where the rows
-    /// are, so that those scales are the same in pixels for every lens ([`super::scale`]).
-    /// 1 keeps the values in degrees that fit the GC2450C.
+    /// angles): absent, the calibration's field of view's extent over the GC2450C's, at
+    /// most 1, so that those scales are a fixed share of the field of view
+    /// ([`super::scale`]). 1 keeps the values in degrees that fit the GC2450C.
     pub angle_scale: Option<f64>,
     pub binning: Binning,
     pub auto_bin_above_px: u64,
@@ -103,7 +103,7 @@ pub struct CombinedOptions {
     /// The largest angle (degrees, around the vanishing point) between a Hough row and an
     /// edge boundary paired with it. Default 5 (the half-width of a crop row seen from the
     /// camera is a few degrees; neighbouring rows are farther apart). Absent: derived from
-    /// the calibration's angular resolution (5° at the GC2450C's; [`super::scale`]).
+    /// the calibration's field of view (5° at the GC2450C's; [`super::scale`]).
     pub pair_max_deg: Option<f64>,
     /// The combined method reports only the edge rows consistent with its vanishing point
     /// (within `vanishing.inlier_deg`); the Hough rows are all reported, as by the Hough
@@ -620,7 +620,7 @@ pub struct Detector {
 
 impl Detector {
     /// A detector for images of `cal` (at its size; another size scales it). Every angular
-    /// option left absent is derived from the calibration's angular resolution
+    /// option left absent is derived from the calibration's field of view
     /// ([`super::scale::resolve`]); [`Detector::options`] gives the values in force.
     pub fn new(cal: &Calibration, opts: DetectorOptions) -> Result<Self, DetectError> {
         let opts = super::scale::resolve(cal, &opts)?.0;

@@ -64,7 +64,7 @@ pub struct PencilOptions {
     pub polish: bool,
     /// The polish's band around a row is a quarter of the angle to its nearest neighbour
     /// (around the vanishing point), at most this (degrees). Default (absent): from the
-    /// calibration's angular resolution (3° at the GC2450C's; [`super::scale`]).
+    /// calibration's field of view (3° at the GC2450C's; [`super::scale`]).
     pub polish_max_band_deg: Option<f64>,
 }
 

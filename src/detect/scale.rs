@@ -1,23 +1,25 @@
-//! The detector's scales for one calibration: how many working-image pixels one radian of the
-//! sphere spans where the rows are, the angular options derived from it, and each option's
-//! angle in pixels (or pixel length in degrees) at that resolution.
+//! The detector's scales for one calibration: how large the field of view is and how many
+//! working-image pixels one radian of the sphere spans there, the angular options derived from
+//! them, and each option's angle in pixels (or pixel length in degrees).
 //!
 //! Owns [`angular_resolution`] (pixels per radian at the image centre and the median over the
-//! field of view, at the detector's working resolution), [`resolve`] (every angular option
-//! left absent set to its reference value times the calibration's factor, so that the Hough
-//! cells, tolerances, merge, inlier, spread and pairing angles are the same in working pixels
-//! for every lens) and [`scales_report`], the lines `omnirow config detector --calib FILE`
-//! prints with the values in force.
+//! field of view at the detector's working resolution, and the field of view's extent),
+//! [`resolve`] (every angular option left absent set to its reference value times the
+//! calibration's factor) and [`scales_report`], the lines `omnirow config detector --calib
+//! FILE` prints with the values in force.
 //!
-//! The reference values (2° Hough cells, 1° vanishing cells and inlier band, …) were tuned
-//! on the GC2450C's half-resolution working image: [`REFERENCE_PX_PER_RAD`] is its median
-//! resolution (the geometric mean of the ideal fisheye's 355.1 and PAL's 334.0 px/rad at
-//! 1224×1025). A calibration of `p` px/rad gets the factor `REFERENCE_PX_PER_RAD / p`,
-//! rounded to an eighth of an octave (a step of 9 %, so that both GC2450C lenses, and any
-//! recalibration of them, keep exactly the reference values the synthetic tables were
-//! measured with) and at most 1: a finer lens gets proportionally finer angles; a coarser
-//! one (a low-resolution image of a wide lens) keeps the reference degrees, since its rows
-//! are no farther apart in angle than the GC2450C's and coarser cells would merge them.
+//! The reference values (2° Hough cells, 1° vanishing cells and inlier band, …) were tuned on
+//! the GC2450C's lenses, whose fields of view span 6.56 sr (an extent, the square root, of
+//! [`REFERENCE_EXTENT_RAD`]). A calibration whose field of view has the extent `e` gets the
+//! factor `e / REFERENCE_EXTENT_RAD`, rounded to an eighth of an octave (a 9 % step, so that
+//! both GC2450C lenses and any recalibration of them keep exactly the reference values the
+//! synthetic tables were measured with) and at most 1. The angular scales are thus a fixed
+//! share of the field of view: the same in pixels for one image read with two focal-length
+//! guesses (the image, not the angles, holds the rows), and the same in angle for one lens at
+//! two resolutions (a 4× finer image of the same scene gives the same rows). Scales that
+//! follow the pixel size instead (measured: CRDLD at f = 300 and 900 px gave the same scores
+//! either way) make a finer image of the same lens split its wide rows into narrow cells and
+//! lose them (tests/detect_scale.rs).
 
 use super::detector::{Binning, DetectorOptions};
 use super::hough::{REFERENCE_BINS, REFERENCE_MERGE_ANGLE_DEG, REFERENCE_MIN_TOLERANCE_DEG};
@@ -29,9 +31,9 @@ use super::DetectError;
 use crate::camera::Calibration;
 use std::fmt::Write;
 
-/// The angular resolution (px/rad, median over the field of view of the working image) at
-/// which the angular options' reference values hold: the GC2450C's at half resolution.
-pub const REFERENCE_PX_PER_RAD: f64 = 344.4;
+/// The field of view's extent (radians, the square root of its solid angle) at which the
+/// angular options' reference values hold: the GC2450C's ideal fisheye (2.562) and PAL (2.556).
+pub const REFERENCE_EXTENT_RAD: f64 = 2.56;
 
 /// The factor is rounded to this fraction of an octave.
 const FACTOR_STEPS_PER_OCTAVE: f64 = 8.0;
@@ -48,6 +50,9 @@ pub struct AngularResolution {
     /// Median over the field of view (a grid of about 4000 pixels) of the pixels per radian
     /// (one over the square root of each pixel's solid angle).
     pub median_px_per_rad: f64,
+    /// The field of view's angular extent (radians): the square root of its solid angle
+    /// (the masked pixels' solid angles summed). The same for any resolution of one lens.
+    pub extent_rad: f64,
 }
 
 /// The angular resolution of `cal` (at its own size, binned as `opts` would bin an RGB or
@@ -76,6 +81,7 @@ pub fn angular_resolution(
     let (wh, ww) = (m.height as usize, m.width as usize);
     let step = ((wh * ww) as f64 / 4000.0).sqrt().max(1.0) as usize;
     let mut v: Vec<f64> = Vec::new();
+    let mut solid = 0.0;
     // Over the field of view; over the whole image when the mask leaves no pixel (the
     // detector then reports the mask for each image).
     for use_mask in [true, false] {
@@ -87,6 +93,10 @@ pub fn angular_resolution(
                 }
                 if let Some(p) = px_per_rad(rf, cf) {
                     v.push(p);
+                    // the sample stands for step × step pixels (fewer at the far edges)
+                    let rows = step.min(wh - (r - step / 2)) as f64;
+                    let cols = step.min(ww - (c - step / 2)) as f64;
+                    solid += rows * cols / (p * p);
                 }
             }
         }
@@ -104,13 +114,15 @@ pub fn angular_resolution(
         factor,
         centre_px_per_rad: centre,
         median_px_per_rad: v[v.len() / 2],
+        extent_rad: solid.sqrt(),
     })
 }
 
-/// The factor the angular options' reference values are multiplied by at resolution `a`:
-/// `REFERENCE_PX_PER_RAD / median px/rad`, rounded to an eighth of an octave, at most 1.
+/// The factor the angular options' reference values are multiplied by for a field of view
+/// of `a`'s extent: `extent / REFERENCE_EXTENT_RAD`, rounded to an eighth of an octave, at
+/// most 1.
 pub fn angle_factor(a: &AngularResolution) -> f64 {
-    let k = REFERENCE_PX_PER_RAD / a.median_px_per_rad;
+    let k = a.extent_rad / REFERENCE_EXTENT_RAD;
     let steps = (k.log2() * FACTOR_STEPS_PER_OCTAVE).round();
     2f64.powf(steps / FACTOR_STEPS_PER_OCTAVE).min(1.0)
 }
@@ -126,7 +138,7 @@ pub struct Scales {
 }
 
 /// `opts` with every angular option left absent set for `cal`: its reference value times
-/// the factor (`opts.angle_scale`, else derived from the calibration's angular resolution),
+/// the factor (`opts.angle_scale`, else derived from the calibration's field of view),
 /// accumulator sizes rounded to whole cells. Options given explicitly are kept.
 pub fn resolve(
     cal: &Calibration,
@@ -207,8 +219,13 @@ pub fn scales_report(cal: &Calibration, opts: &DetectorOptions) -> Result<String
         a.centre_px_per_rad, p
     ));
     line(format!(
+        "field of view: {:.3} sr, an extent of {:.3} rad",
+        a.extent_rad * a.extent_rad,
+        a.extent_rad
+    ));
+    line(format!(
         "angle_scale {:.4} ({}): angular options absent from the configuration are their \
-         reference value (at {REFERENCE_PX_PER_RAD} px/rad) times it",
+         reference value (at an extent of {REFERENCE_EXTENT_RAD} rad) times it",
         sc.factor,
         if sc.derived {
             "derived from the calibration"
@@ -306,26 +323,39 @@ mod tests {
             assert_eq!(o.vanishing.inlier_deg, Some(1.0));
             assert_eq!(o.combined.pair_max_deg, Some(5.0));
         }
-        // The same lens at twice the resolution (unbinned): half the angles, twice the cells.
+        // The same lens at twice the resolution (unbinned), or at a quarter: the same angles.
         let fine = DetectorOptions {
             binning: Binning::Off,
             ..Default::default()
         };
-        let (o, sc) = resolve(&ideal_fisheye(2050, 2448).unwrap(), &fine).unwrap();
-        assert_eq!(sc.factor, 0.5, "{sc:?}");
-        assert_eq!(o.hough.phi_bins, Some(180));
-        assert_eq!(o.vanishing.inlier_deg, Some(0.5));
-        assert_eq!(o.edge.merge.max_angle_rad, Some(0.0025));
-        // A coarser image of the same lens keeps the reference degrees.
+        let (_, sc) = resolve(&ideal_fisheye(2050, 2448).unwrap(), &fine).unwrap();
+        assert_eq!(sc.factor, 1.0, "{sc:?}");
         let (_, sc) = resolve(&ideal_fisheye(512, 612).unwrap(), &defaults).unwrap();
         assert_eq!(sc.factor, 1.0, "{sc:?}");
+        // A narrower lens: finer angles, in proportion to its field of view's extent.
+        let narrow = |f: f64| {
+            let text = format!(
+                "[pinhole]\nwidth = 512\nheight = 512\nfx = {f}\nfy = {f}\ncx = 255.5\ncy = 255.5\n"
+            );
+            let cal = Calibration::parse_toml(&text, std::path::Path::new("p.toml")).unwrap();
+            resolve(&cal, &defaults).unwrap()
+        };
+        let ((o3, s3), (o9, s9)) = (narrow(300.0), narrow(900.0));
+        // 1.740 sr and 0.300 sr: extents 1.319 and 0.547 rad
+        assert!((s3.resolution.extent_rad - 1.319).abs() < 0.01, "{s3:?}");
+        assert!((s9.resolution.extent_rad - 0.547).abs() < 0.01, "{s9:?}");
+        let r = s3.factor / s9.factor;
+        assert!((r - 1.319 / 0.547).abs() < 0.25, "{s3:?} {s9:?}");
+        assert_eq!(o3.hough.phi_bins, Some((90.0 / s3.factor).round() as usize));
+        assert_eq!(o9.vanishing.inlier_deg, Some(s9.factor));
+        assert_eq!(o9.edge.merge.max_angle_rad, Some(0.005 * s9.factor));
     }
 
     #[test]
     fn explicit_options_override_the_derived_ones() {
         let cal = ideal_fisheye(2050, 2448).unwrap();
         let opts: DetectorOptions = toml::from_str(
-            "binning = \"off\"\n[hough]\nphi_bins = 60\n[vanishing]\ninlier_deg = 2.0\n",
+            "angle_scale = 0.5\n[hough]\nphi_bins = 60\n[vanishing]\ninlier_deg = 2.0\n",
         )
         .unwrap();
         let (o, _) = resolve(&cal, &opts).unwrap();

@@ -23,7 +23,7 @@ use serde::{Deserialize, Serialize};
 #[serde(deny_unknown_fields, default)]
 pub struct VanishingOptions {
     /// Accumulator cells along the azimuth (0..180°). Default (absent): derived from the
-    /// calibration's angular resolution (180, 1° cells, at the GC2450C's; [`super::scale`]).
+    /// calibration's field of view (180, 1° cells, at the GC2450C's; [`super::scale`]).
     pub azimuth_bins: Option<usize>,
     /// Accumulator cell height along the elevation (degrees). Default: from the calibration
     /// (1° at the GC2450C's resolution).

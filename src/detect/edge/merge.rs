@@ -24,7 +24,7 @@ pub struct MergeOptions {
     /// Sections whose normals are closer than this angle (radians) may describe the same
     /// row. Default 0.005: the two boundaries of a distant row are only a few hundredths of
     /// a radian apart, and merging them mixes two lines into one biased normal. Absent:
-    /// derived from the calibration's angular resolution (0.005 at the GC2450C's;
+    /// derived from the calibration's field of view (0.005 at the GC2450C's;
     /// [`crate::detect::scale`]).
     pub max_angle_rad: Option<f64>,
     /// The merged great circle must fit all points with an RMS distance within this many
