@@ -127,8 +127,16 @@ impl Heartbeat {
     }
 }
 
+impl Default for Shared {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
 impl Shared {
-    pub(crate) fn new() -> Self {
+    /// A status with no thread registered and no frame yet (the pipeline makes its own; the
+    /// HTTP fuzz target serves one).
+    pub fn new() -> Self {
         let now = Instant::now();
         Shared {
             started: now,
