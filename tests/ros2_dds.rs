@@ -11,7 +11,9 @@
 #![cfg(feature = "ros2")]
 
 use omnirow::frame::{ImageView, PixelFormat};
-use omnirow::ros2::{Reliability, Ros2Config, Ros2Publisher, RosEstimate, RosStatus};
+use omnirow::ros2::{
+    Reliability, Ros2Config, Ros2Publisher, RosEstimate, RosGuidance, RosStatus, TrackedRow,
+};
 use serde_json::Value;
 use std::collections::HashMap;
 use std::io::{BufRead, BufReader};
@@ -150,6 +152,43 @@ fn estimate(i: u64) -> (u64, f64, f64, f64) {
     )
 }
 
+/// Frame `i`'s row guidance: tracked (offset, heading, curvature and covariance differing
+/// from frame to frame), except every seventh frame, which is lost (no `row_*` sample).
+fn guidance(i: u64) -> RosGuidance<'static> {
+    let x = i as f64;
+    let lost = i % 7 == 3;
+    let (sd_e, sd_h) = (0.01 + 0.001 * x, 0.002 + 0.0001 * x);
+    let tracked = TrackedRow {
+        lateral_offset_m: 0.2 * (0.9 * x).sin(),
+        heading_rad: 0.1 * (0.4 * x).cos(),
+        curvature_per_m: 0.03 * (0.2 * x).sin(),
+        row_spacing_m: 0.5 + 0.001 * x,
+        row_index: (i % 3) as i64 - 1,
+        covariance: [
+            [sd_e * sd_e, 0.3 * sd_e * sd_h, 0.0, 0.0],
+            [0.3 * sd_e * sd_h, sd_h * sd_h, 0.0, 0.0],
+            [0.0, 0.0, 1e-6, 0.0],
+            [0.0, 0.0, 0.0, 1e-6],
+        ],
+    };
+    RosGuidance {
+        tracking: if lost {
+            "lost"
+        } else if i % 7 == 4 {
+            "reacquired"
+        } else if i % 5 == 0 {
+            "coasting"
+        } else {
+            "tracking"
+        },
+        mode: "between_rows",
+        tracked: (!lost).then_some(tracked),
+        roll_rad: (i % 2 == 0).then_some(0.001 * x),
+        end_of_row_m: None,
+        warnings: &[],
+    }
+}
+
 /// Frame `i`'s pixels: an 8×4 RGB image whose bytes depend on `i`.
 fn pixels(i: u64) -> Vec<u8> {
     (0..8 * 4 * 3)
@@ -183,13 +222,15 @@ fn drive(p: &mut Ros2Publisher, mut until: impl FnMut() -> bool) -> u64 {
             tilt_rad: Some(t),
             quality: q,
             status: "ok",
+            guidance: Some(guidance(i)),
         };
         assert!(p.publish_estimate(&e).unwrap());
         let px = pixels(i);
         let view = ImageView::new(8, 4, PixelFormat::Rgb8, &px).unwrap();
         p.publish_frame(&view, ns).unwrap();
         if i % 5 == 0 {
-            p.publish_status_at(&status(i), ns).unwrap();
+            p.publish_status_at(&status(i), Some(&guidance(i)), ns)
+                .unwrap();
         }
         i += 1;
         std::thread::sleep(Duration::from_millis(50));
@@ -213,6 +254,107 @@ fn frame_index(msg: &Value) -> u64 {
 
 fn f(v: &Value) -> f64 {
     v.as_f64().unwrap_or_else(|| panic!("not a number: {v}"))
+}
+
+fn floats(v: &Value) -> Vec<f64> {
+    v.as_array().unwrap().iter().map(f).collect()
+}
+
+/// Yaw of a quaternion [x, y, z, w] (ZYX).
+fn yaw(q: &[f64]) -> f64 {
+    (2.0 * (q[3] * q[2] + q[0] * q[1])).atan2(1.0 - 2.0 * (q[1] * q[1] + q[2] * q[2]))
+}
+
+/// `row_pose` of a frame tracked as `t` (tool point at base_link's origin): base_link at the
+/// offset across the rows frame, yawed by the heading error (−heading), the filter's offset
+/// and heading (co)variances in the y and yaw slots (the cross term's sign flipped with the
+/// yaw), everything else unobserved.
+fn check_row_pose(m: &Value, t: &TrackedRow, frame_id: &str) {
+    assert_eq!(m["header"]["frame_id"], frame_id);
+    let p = floats(&m["pose"]["position"]);
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * b.abs().max(1e-3);
+    assert!(
+        p[0] == 0.0 && close(p[1], t.lateral_offset_m) && p[2] == 0.0,
+        "{m} vs {t:?}"
+    );
+    let q = floats(&m["pose"]["orientation"]);
+    assert!((yaw(&q) + t.heading_rad).abs() < 1e-12, "{m} vs {t:?}");
+    assert!(q[0] == 0.0 && q[1] == 0.0, "a planar pose: {q:?}");
+    let c = floats(&m["covariance"]);
+    let p = &t.covariance;
+    assert!(close(c[7], p[0][0]) && close(c[35], p[1][1]), "{c:?}");
+    assert!(close(c[11], -p[0][1]) && close(c[31], -p[0][1]), "{c:?}");
+    for i in [0, 2, 3, 4] {
+        assert_eq!(c[i * 7], 1.0e6, "{c:?}");
+    }
+}
+
+/// `row_path`: the followed line in base_link, from abeam of the robot 5 m ahead every 0.5 m
+/// (the defaults), an arc of the tracked curvature; written out here independently: a point
+/// `s` along the line in the rows frame, then into base_link (origin `offset` left of the
+/// line, turned by −heading).
+fn check_row_path(m: &Value, t: &TrackedRow, frame_id: &str) {
+    assert_eq!(m["header"]["frame_id"], frame_id);
+    let poses = m["poses"].as_array().unwrap();
+    assert_eq!(poses.len(), 11);
+    let (e, h, k) = (t.lateral_offset_m, t.heading_rad, t.curvature_per_m);
+    for (j, ps) in poses.iter().enumerate() {
+        assert_eq!(ps["header"], m["header"]);
+        let s = 0.5 * j as f64;
+        let (xr, yr) = if k == 0.0 {
+            (s, 0.0)
+        } else {
+            ((k * s).sin() / k, (1.0 - (k * s).cos()) / k)
+        };
+        let want = [
+            h.cos() * xr - h.sin() * (yr - e),
+            h.sin() * xr + h.cos() * (yr - e),
+        ];
+        let p = floats(&ps["pose"]["position"]);
+        assert!(
+            (p[0] - want[0]).abs() < 1e-9 && (p[1] - want[1]).abs() < 1e-9 && p[2] == 0.0,
+            "pose {j}: {p:?} vs {want:?}"
+        );
+        let q = floats(&ps["pose"]["orientation"]);
+        assert!((yaw(&q) - (h + k * s)).abs() < 1e-9, "pose {j}: {q:?}");
+    }
+}
+
+/// `row_offset` and `row_heading_error` (float32, no stamp): in the order received, each the
+/// offset (heading error = −heading) of a later tracked frame than the one before.
+fn check_row_follow(k: &HashMap<String, Vec<Value>>, tracked: &[TrackedRow]) {
+    let bits = |kind: &str| -> Vec<u32> {
+        k[kind]
+            .iter()
+            .map(|m| m["bits"].as_u64().unwrap() as u32)
+            .collect()
+    };
+    for (kind, want) in [
+        (
+            "row_offset",
+            tracked
+                .iter()
+                .map(|t| (t.lateral_offset_m as f32).to_bits())
+                .collect::<Vec<u32>>(),
+        ),
+        (
+            "row_heading_error",
+            tracked
+                .iter()
+                .map(|t| (-t.heading_rad as f32).to_bits())
+                .collect(),
+        ),
+    ] {
+        let got = bits(kind);
+        let mut from = 0;
+        for g in &got {
+            let at = want[from..]
+                .iter()
+                .position(|w| w == g)
+                .unwrap_or_else(|| panic!("{kind} {} is no later frame's", f32::from_bits(*g)));
+            from += at + 1;
+        }
+    }
 }
 
 fn by_kind(samples: &[Value]) -> HashMap<String, Vec<Value>> {
@@ -243,6 +385,14 @@ fn cyclone_dds_decodes_every_topic_as_published() {
             "image_raw=3",
             "--want",
             "discovery=1",
+            "--want",
+            "row_pose=8",
+            "--want",
+            "row_path=3",
+            "--want",
+            "row_offset=8",
+            "--want",
+            "row_heading_error=8",
             "--timeout",
             "40",
         ],
@@ -348,6 +498,47 @@ fn cyclone_dds_decodes_every_topic_as_published() {
         assert_eq!(v["estimate_status"], "degraded");
     }
 
+    // The guidance's status beside the pipeline's.
+    for m in &k["diagnostics"] {
+        let g = guidance(frame_index(m));
+        let s = &m["status"][1];
+        assert_eq!(s["name"], "omnirow: guidance");
+        assert_eq!(s["values"]["tracking"], g.tracking);
+        let level = match g.tracking {
+            "lost" => 2,
+            "coasting" => 1,
+            _ => 0,
+        };
+        assert_eq!(s["level"].as_u64(), Some(level), "{s}");
+        match g.tracked {
+            Some(t) => assert_eq!(
+                s["values"]["lateral_offset_m"],
+                format!("{:.4}", t.lateral_offset_m)
+            ),
+            None => assert!(s["values"].get("lateral_offset_m").is_none(), "{s}"),
+        }
+    }
+
+    // The row guidance: row_pose and row_path per frame; no sample for a lost frame.
+    for m in &k["row_pose"] {
+        let i = frame_index(m);
+        let t = guidance(i)
+            .tracked
+            .unwrap_or_else(|| panic!("frame {i} is lost"));
+        check_row_pose(m, &t, "rows");
+    }
+    for m in &k["row_path"] {
+        let i = frame_index(m);
+        let t = guidance(i)
+            .tracked
+            .unwrap_or_else(|| panic!("frame {i} is lost"));
+        check_row_path(m, &t, "test_base");
+    }
+    // row_offset / row_heading_error have no stamp: their values, in order, are those of the
+    // tracked frames.
+    let tracked: Vec<TrackedRow> = (0..frames).filter_map(|i| guidance(i).tracked).collect();
+    check_row_follow(&k, &tracked);
+
     // ros_discovery_info: the node is announced the way `ros2 node list` reads it.
     let nodes: Vec<&Value> = k["discovery"]
         .iter()
@@ -432,7 +623,7 @@ fn ddsls_sees_the_publications_and_ros_discovery_names_their_writers() {
         .collect();
 
     let topics = p.topics();
-    assert_eq!(topics.len(), 4);
+    assert_eq!(topics.len(), 8);
     for t in &topics {
         let (ty, guid) = seen
             .get(&t.dds_name)
@@ -450,6 +641,10 @@ fn ddsls_sees_the_publications_and_ros_discovery_names_their_writers() {
         [
             "rt/omnirow/orientation",
             "rt/omnirow/heading_tilt",
+            "rt/omnirow/row_pose",
+            "rt/omnirow/row_path",
+            "rt/omnirow/row_offset",
+            "rt/omnirow/row_heading_error",
             "rt/diagnostics",
             "rt/omnirow/image_raw"
         ]
@@ -596,7 +791,7 @@ mod node {
         );
         let mut cfg = config(d);
         cfg.image_rate_hz = 5.0;
-        let p = omnirow::ros2::node_publisher(&cfg, "paced test source")
+        let p = omnirow::ros2::node_publisher(&cfg, "paced test source", [0.0; 2])
             .unwrap()
             .expect("enabled");
         let pipeline = Pipeline::start(
@@ -675,7 +870,15 @@ fn omnirow_run_publishes_its_estimates_on_ros2() {
             "--want",
             "orientation=8",
             "--want",
-            "diagnostics=1",
+            "diagnostics=2",
+            "--want",
+            "row_pose=8",
+            "--want",
+            "row_path=4",
+            "--want",
+            "row_offset=8",
+            "--want",
+            "row_heading_error=8",
             "--timeout",
             "60",
         ],
@@ -775,4 +978,80 @@ fn omnirow_run_publishes_its_estimates_on_ros2() {
         s["hardware_id"].as_str().unwrap().contains("synthetic"),
         "{s}"
     );
+    check_run_guidance(&k, &estimates);
+}
+
+/// The row guidance topics of `omnirow run` against the guidance in the estimate the node sent
+/// over UDP for the same frame, and against the synthetic drive's truth (signs included).
+fn check_run_guidance(
+    k: &HashMap<String, Vec<Value>>,
+    estimates: &HashMap<u64, omnirow::estimate::Estimate>,
+) {
+    let tracked_of = |m: &Value| -> (TrackedRow, &omnirow::estimate::Estimate, &'static str) {
+        let e = estimates
+            .get(&stamp_ns(m))
+            .unwrap_or_else(|| panic!("no UDP estimate with the stamp of {m}"));
+        let g = e.guidance.as_ref().expect("the node runs row guidance");
+        let r = RosGuidance::from(g);
+        let t = r
+            .tracked
+            .unwrap_or_else(|| panic!("a row sample for a frame without a tracked estimate"));
+        (t, e, g.tracking.name())
+    };
+    let mut signs = 0;
+    for m in &k["row_pose"] {
+        let (t, e, tracking) = tracked_of(m);
+        check_row_pose(m, &t, "rows");
+        if tracking != "tracking" {
+            continue;
+        }
+        // Against the truth: the camera (at base_link's origin) is `path_offset_m` left of
+        // its inter-row path's centre line, and the rows' heading is the truth's, so the
+        // pose's y is that offset (modulo a spacing: the followed path) and its yaw −heading.
+        let truth = e
+            .truth
+            .as_ref()
+            .expect("synthetic frames carry their truth");
+        let y = f(&m["pose"]["position"][1]);
+        let s = truth.row_spacing_m;
+        let want = truth.path_offset_m(truth.path());
+        let d = (y - want) - ((y - want) / s).round() * s;
+        assert!(d.abs() < 0.02, "row_pose y {y} vs truth offset {want}");
+        if want.abs() > 0.03 {
+            assert_eq!(y.signum(), want.signum(), "offset sign: {y} vs {want}");
+            signs += 1;
+        }
+        let yaw_err = yaw(&floats(&m["pose"]["orientation"])) + truth.heading_rad;
+        assert!(
+            yaw_err.abs() < 1f64.to_radians(),
+            "row_pose yaw vs truth: {yaw_err}"
+        );
+    }
+    // The drive weaves ±10 cm: many frames are off the centre line by more than 3 cm.
+    assert!(
+        signs >= 3,
+        "only {signs} row_pose offsets away from the centre line"
+    );
+    for m in &k["row_path"] {
+        let (t, _, _) = tracked_of(m);
+        check_row_path(m, &t, "test_base");
+    }
+    let mut by_time: Vec<&omnirow::estimate::Estimate> = estimates.values().collect();
+    by_time.sort_by_key(|e| e.capture_ns);
+    let tracked: Vec<TrackedRow> = by_time
+        .iter()
+        .filter_map(|e| RosGuidance::from(e.guidance.as_ref()?).tracked)
+        .collect();
+    check_row_follow(k, &tracked);
+    let g = k["diagnostics"]
+        .iter()
+        .flat_map(|m| m["status"].as_array().unwrap())
+        .find(|s| s["name"] == "omnirow: guidance")
+        .expect("a guidance status on /diagnostics");
+    let level = match g["values"]["tracking"].as_str().unwrap() {
+        "lost" => 2,
+        "coasting" => 1,
+        _ => 0,
+    };
+    assert!(g["level"].as_u64().unwrap() >= level, "{g}");
 }

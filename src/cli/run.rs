@@ -12,7 +12,7 @@ use crate::camera::{Calibration, IdealLens};
 use crate::config::Config;
 use crate::detect::{Detection, Detector};
 use crate::frame::ImageView;
-use crate::guidance::Guidance;
+use crate::guidance::{CurvatureFit, CurvatureMeasurement, CurvatureOptions, Guidance};
 use crate::notify::Notifier;
 use crate::pipeline::{Pipeline, Processor};
 use crate::publish::http::{HttpServer, OverlayFn};
@@ -184,8 +184,9 @@ fn camera_source(_: &crate::gige::GigeConfig) -> anyhow::Result<Box<dyn Source>>
     )
 }
 
-/// The detector as the pipeline's processing step.
-struct DetectorWorker(Detector);
+/// The detector as the pipeline's processing step, with the rows' curvature fit when row
+/// guidance runs.
+struct DetectorWorker(Detector, Option<CurvatureFit>);
 
 impl Processor for DetectorWorker {
     fn process(
@@ -194,6 +195,18 @@ impl Processor for DetectorWorker {
         out: &mut Detection,
     ) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
         self.0.process(view, out).map_err(Into::into)
+    }
+
+    fn ground_curvature(&mut self, det: &Detection) -> Option<CurvatureMeasurement> {
+        let fit = self.1.as_mut()?;
+        let vp = det.vanishing_point?.direction;
+        let p = self.0.points();
+        fit.measure(
+            &vp.into(),
+            det.rows.iter().map(|r| r.normal.into()),
+            &p.rays,
+            &p.weights,
+        )
     }
 }
 
@@ -261,8 +274,12 @@ pub fn run(args: RunArgs, record_to: Option<PathBuf>) -> anyhow::Result<ExitCode
     let opts = cfg.detector.clone();
     let mut processors: Vec<Box<dyn Processor>> = Vec::new();
     for _ in 0..cfg.workers {
+        let fit = cfg
+            .guidance
+            .map(|_| CurvatureFit::new(cal.mounting, CurvatureOptions::default()));
         processors.push(Box::new(DetectorWorker(
             Detector::new(&cal, opts.clone()).context("detector")?,
+            fit,
         )));
     }
 
@@ -285,7 +302,8 @@ pub fn run(args: RunArgs, record_to: Option<PathBuf>) -> anyhow::Result<ExitCode
     if print {
         publishers.push(Box::new(StdoutPublisher::new()));
     }
-    if let Some(p) = crate::ros2::node_publisher(&cfg.ros2, &source.describe())
+    let tool_point_m = cfg.guidance.map_or([0.0; 2], |g| g.tool_point_m);
+    if let Some(p) = crate::ros2::node_publisher(&cfg.ros2, &source.describe(), tool_point_m)
         .context("[ros2] publisher (docs/ros2.md)")?
     {
         tracing::info!(

@@ -11,6 +11,9 @@ use std::net::IpAddr;
 /// (7400 + 250 · domain + offsets); ROS 2 documents 0..=232 for Linux.
 pub const MAX_DOMAIN_ID: u16 = 232;
 
+/// Most poses on `row_path` (`path_length_m / path_step_m`).
+pub const MAX_PATH_POSES: usize = 1000;
+
 /// How a ROS 2 node named after omnirow joins the ROS 2 graph.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -28,6 +31,13 @@ pub struct Ros2Config {
     pub frame_id: String,
     /// `header.frame_id` of `image_raw`: the camera's optical frame (the recorder's default).
     pub image_frame_id: String,
+    /// `header.frame_id` of `row_pose`: the rows frame (x along the followed line in the
+    /// direction of travel, y left, origin on the line abeam of the robot).
+    pub rows_frame_id: String,
+    /// Length of the followed line published on `row_path`, metres ahead of the robot.
+    pub path_length_m: f64,
+    /// Distance between the poses of `row_path`, metres.
+    pub path_step_m: f64,
     /// Local IP addresses whose interfaces DDS may use (multicast and advertised unicast
     /// locators). Empty: all interfaces.
     pub networks: Vec<IpAddr>,
@@ -48,6 +58,9 @@ impl Default for Ros2Config {
             node_name: "omnirow".to_string(),
             frame_id: "base_link".to_string(),
             image_frame_id: "omnirow_camera".to_string(),
+            rows_frame_id: "rows".to_string(),
+            path_length_m: 5.0,
+            path_step_m: 0.5,
             networks: Vec::new(),
             qos: QosConfig::default(),
             sigma_deg_at_full_quality: 1.0,
@@ -113,6 +126,30 @@ impl Ros2Config {
         }
         if self.image_frame_id.is_empty() {
             return err("image_frame_id", "must not be empty".to_string());
+        }
+        if self.rows_frame_id.is_empty() {
+            return err("rows_frame_id", "must not be empty".to_string());
+        }
+        if self.rows_frame_id == self.frame_id {
+            return err(
+                "rows_frame_id",
+                format!(
+                    "{:?} is also frame_id: the rows frame moves against the robot's",
+                    self.rows_frame_id
+                ),
+            );
+        }
+        let (len, step) = (self.path_length_m, self.path_step_m);
+        if !(step.is_finite() && step > 0.0) {
+            return err("path_step_m", format!("{step} is not a distance > 0"));
+        }
+        if !(len.is_finite() && len >= step && len / step <= MAX_PATH_POSES as f64) {
+            return err(
+                "path_length_m",
+                format!(
+                    "{len} must be at least path_step_m ({step}) and at most {MAX_PATH_POSES} steps"
+                ),
+            );
         }
         if self.qos.depth == 0 {
             return err("qos.depth", "must be at least 1".to_string());
@@ -216,6 +253,9 @@ mod tests {
             node_name = "rows"
             frame_id = "camera_link"
             image_frame_id = "cam_optical"
+            rows_frame_id = "crop_rows"
+            path_length_m = 3.0
+            path_step_m = 0.25
             networks = ["127.0.0.1", "::1"]
             sigma_deg_at_full_quality = 0.5
             image_rate_hz = 2.0
@@ -230,6 +270,8 @@ mod tests {
         assert_eq!(c.networks.len(), 2);
         assert_eq!(c.qos.reliability, Reliability::Reliable);
         assert_eq!(c.qos.depth, 10);
+        assert_eq!(c.rows_frame_id, "crop_rows");
+        assert_eq!((c.path_length_m, c.path_step_m), (3.0, 0.25));
     }
 
     #[test]
@@ -255,6 +297,13 @@ mod tests {
         bad(|c| c.node_name = "a__b".into(), "node_name");
         bad(|c| c.frame_id = "".into(), "frame_id");
         bad(|c| c.image_frame_id = "".into(), "image_frame_id");
+        bad(|c| c.rows_frame_id = "".into(), "rows_frame_id");
+        bad(|c| c.rows_frame_id = "base_link".into(), "rows_frame_id");
+        bad(|c| c.path_step_m = 0.0, "path_step_m");
+        bad(|c| c.path_step_m = f64::INFINITY, "path_step_m");
+        bad(|c| c.path_length_m = 0.1, "path_length_m");
+        bad(|c| c.path_length_m = f64::NAN, "path_length_m");
+        bad(|c| c.path_length_m = 1000.0, "path_length_m");
         bad(|c| c.qos.depth = 0, "qos.depth");
         bad(
             |c| c.sigma_deg_at_full_quality = 0.0,

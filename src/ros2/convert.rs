@@ -16,7 +16,7 @@
 //! (−90°, 90°]. `~/heading_tilt` carries `h` and `t` unchanged, for plotting.
 
 use super::config::Ros2Config;
-use super::input::{RosEstimate, RosStatus};
+use super::input::{RosEstimate, RosGuidance, RosStatus};
 use super::msg::{
     DiagnosticArray, DiagnosticStatus, Header, Image, Imu, KeyValue, Quaternion, Time,
     TimeRangeError, Vector3, Vector3Stamped,
@@ -74,13 +74,19 @@ impl RowAttitude {
     }
 }
 
-/// Builds every message omnirow publishes; holds what the config fixes.
+/// Builds every message omnirow publishes; holds what the config fixes. The row guidance
+/// messages are built in [`super::rows`].
 #[derive(Debug, Clone)]
 pub struct MessageBuilder {
-    frame_id: String,
+    pub(super) frame_id: String,
     image_frame_id: String,
-    node_name: String,
+    pub(super) rows_frame_id: String,
+    pub(super) node_name: String,
     sigma_best_rad: f64,
+    pub(super) path_length_m: f64,
+    pub(super) path_step_m: f64,
+    /// The guidance's tool point (base_link x, y, metres), where its offset is measured.
+    pub(super) tool_point_m: [f64; 2],
 }
 
 impl MessageBuilder {
@@ -88,12 +94,23 @@ impl MessageBuilder {
         MessageBuilder {
             frame_id: config.frame_id.clone(),
             image_frame_id: config.image_frame_id.clone(),
+            rows_frame_id: config.rows_frame_id.clone(),
             node_name: config.node_name.clone(),
             sigma_best_rad: config.sigma_deg_at_full_quality.to_radians(),
+            path_length_m: config.path_length_m,
+            path_step_m: config.path_step_m,
+            tool_point_m: [0.0, 0.0],
         }
     }
 
-    fn header(&self, ns: u64) -> Result<Header, TimeRangeError> {
+    /// The guidance's tool point (`[guidance] tool_point_m`, base_link x and y, metres): the
+    /// row guidance measures its offset there, `row_pose` moves it to base_link.
+    pub fn with_tool_point(mut self, tool_point_m: [f64; 2]) -> MessageBuilder {
+        self.tool_point_m = tool_point_m;
+        self
+    }
+
+    pub(super) fn header(&self, ns: u64) -> Result<Header, TimeRangeError> {
         Ok(Header {
             stamp: Time::from_nanos(ns)?,
             frame_id: self.frame_id.clone(),
@@ -160,11 +177,13 @@ impl MessageBuilder {
         }
     }
 
-    /// `diagnostic_msgs/DiagnosticArray` with one status named `<node_name>: pipeline`,
-    /// stamped `now_ns` (wall clock: the summary is not tied to a frame).
+    /// `diagnostic_msgs/DiagnosticArray` with a status named `<node_name>: pipeline` and,
+    /// when the node runs row guidance, one named `<node_name>: guidance` (the latest
+    /// frame's), stamped `now_ns` (wall clock: the summary is not tied to a frame).
     pub fn diagnostics(
         &self,
         s: &RosStatus,
+        guidance: Option<&RosGuidance>,
         now_ns: u64,
     ) -> Result<DiagnosticArray, TimeRangeError> {
         let kv = |key: &str, value: String| KeyValue {
@@ -190,18 +209,22 @@ impl MessageBuilder {
             ),
             None => format!("{}; source {}", s.estimate_status, s.source_state),
         };
+        let mut status = vec![DiagnosticStatus {
+            level: Self::level(s.estimate_status),
+            name: format!("{}: pipeline", self.node_name),
+            message,
+            hardware_id: s.hardware_id.to_string(),
+            values,
+        }];
+        if let Some(g) = guidance {
+            status.push(self.guidance_status(g, s.hardware_id));
+        }
         Ok(DiagnosticArray {
             header: Header {
                 stamp: Time::from_nanos(now_ns)?,
                 frame_id: String::new(),
             },
-            status: vec![DiagnosticStatus {
-                level: Self::level(s.estimate_status),
-                name: format!("{}: pipeline", self.node_name),
-                message,
-                hardware_id: s.hardware_id.to_string(),
-                values,
-            }],
+            status,
         })
     }
 
@@ -277,6 +300,7 @@ mod tests {
             tilt_rad: t,
             quality: q,
             status: "ok",
+            guidance: None,
         }
     }
 
@@ -404,7 +428,8 @@ mod tests {
             camera_state: Some("lost"),
             hardware_id: "Prosilica GC2450C 02-2131A",
         };
-        let d = b.diagnostics(&s, 5_000_000_001).unwrap();
+        let d = b.diagnostics(&s, None, 5_000_000_001).unwrap();
+        assert_eq!(d.status.len(), 1, "no guidance, no guidance status");
         assert_eq!(d.header.stamp, Time { sec: 5, nanosec: 1 });
         let st = &d.status[0];
         assert_eq!(st.level, DiagnosticStatus::ERROR);
@@ -429,7 +454,7 @@ mod tests {
             camera_state: None,
             ..s
         };
-        let d = b.diagnostics(&replay, 0).unwrap();
+        let d = b.diagnostics(&replay, None, 0).unwrap();
         assert!(d.status[0].values.iter().all(|kv| kv.key != "camera_state"));
     }
 

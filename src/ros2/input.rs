@@ -1,8 +1,11 @@
 //! What the ROS 2 publisher needs from the node, and nothing more: the seam between the
 //! pipeline's own estimate and status types and the ROS 2 messages.
 //!
-//! Owns [`RosEstimate`] (one frame's answer) and [`RosStatus`] (the once-a-second summary).
-//! Both borrow, so mapping the node's types onto them costs no allocation.
+//! Owns [`RosEstimate`] (one frame's answer, with its row guidance as [`RosGuidance`]) and
+//! [`RosStatus`] (the once-a-second summary). They borrow or copy, so mapping the node's types
+//! onto them costs no allocation.
+
+use crate::guidance::Warning;
 
 /// One frame's estimate, as the ROS 2 topics carry it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -19,6 +22,43 @@ pub struct RosEstimate<'a> {
     pub quality: f64,
     /// `ok`, `no_rows`, `degraded`, `camera_lost`, ...
     pub status: &'a str,
+    /// Row guidance of this frame, when the node runs it (`None`: `[guidance]` disabled).
+    pub guidance: Option<RosGuidance<'a>>,
+}
+
+/// One frame's row guidance (see [`crate::guidance::GuidanceEstimate`] for each field's
+/// meaning and sign; REP 103 throughout).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RosGuidance<'a> {
+    /// `tracking`, `coasting`, `lost` or `reacquired`.
+    pub tracking: &'a str,
+    /// `between_rows` or `over_row`.
+    pub mode: &'a str,
+    /// The tracked estimate; `None` when the tracker has none (`lost`).
+    pub tracked: Option<TrackedRow>,
+    /// Roll about the rows, radians, right side down positive; `None`: unobserved.
+    pub roll_rad: Option<f64>,
+    /// Distance ahead to the end of the rows, metres; `None`: not seen ending.
+    pub end_of_row_m: Option<f64>,
+    /// Configuration warnings: the rows disagree with the configured geometry.
+    pub warnings: &'a [Warning],
+}
+
+/// The tracker's estimate of the followed line, for the tool point.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TrackedRow {
+    /// Offset of the tool point from the followed line, metres, positive when it is left of it.
+    pub lateral_offset_m: f64,
+    /// The rows' heading in the robot frame, counter-clockwise from forward, radians (the
+    /// robot's yaw relative to the rows is its negative).
+    pub heading_rad: f64,
+    /// Curvature of the followed line, 1/m, positive when it bends to the left.
+    pub curvature_per_m: f64,
+    pub row_spacing_m: f64,
+    /// The followed line's index relative to the line nearest the tool point.
+    pub row_index: i64,
+    /// Filter covariance of (offset, heading, curvature, spacing), row-major.
+    pub covariance: [[f64; 4]; 4],
 }
 
 /// The node's once-a-second summary, published as `diagnostic_msgs/DiagnosticArray`.

@@ -1,10 +1,12 @@
 //! ROS 2 message types omnirow publishes, laid out field for field as their `.msg`/IDL
 //! definitions so that serde's CDR encoding (RustDDS) is byte-identical to what rclcpp sends.
 //!
-//! Owns the Rust mirrors of `builtin_interfaces/Time`, `std_msgs/Header`,
-//! `geometry_msgs/{Quaternion, Vector3, Vector3Stamped}`, `sensor_msgs/{Imu, Image}` and
-//! `diagnostic_msgs/{KeyValue, DiagnosticStatus, DiagnosticArray}`, and the [`RosType`] trait
-//! that names each one's ROS package and type. Field order is the wire order: do not reorder.
+//! Owns the Rust mirrors of `builtin_interfaces/Time`, `std_msgs/{Header, Float32}`,
+//! `geometry_msgs/{Quaternion, Vector3, Vector3Stamped, Point, Pose, PoseStamped,
+//! PoseWithCovariance, PoseWithCovarianceStamped}`, `nav_msgs/Path`,
+//! `sensor_msgs/{Imu, Image}` and `diagnostic_msgs/{KeyValue, DiagnosticStatus,
+//! DiagnosticArray}`, and the [`RosType`] trait that names each one's ROS package and type.
+//! Field order is the wire order: do not reorder.
 
 use serde::{Deserialize, Serialize};
 
@@ -110,6 +112,101 @@ pub struct Vector3Stamped {
 impl RosType for Vector3Stamped {
     const PACKAGE: &'static str = "geometry_msgs";
     const NAME: &'static str = "Vector3Stamped";
+}
+
+/// `std_msgs/Float32`: a bare number, no header (what row-follow controllers take).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct Float32 {
+    pub data: f32,
+}
+
+impl RosType for Float32 {
+    const PACKAGE: &'static str = "std_msgs";
+    const NAME: &'static str = "Float32";
+}
+
+/// `geometry_msgs/Point`.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct Point {
+    pub x: f64,
+    pub y: f64,
+    pub z: f64,
+}
+
+impl RosType for Point {
+    const PACKAGE: &'static str = "geometry_msgs";
+    const NAME: &'static str = "Point";
+}
+
+/// `geometry_msgs/Pose`: a position and an orientation.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct Pose {
+    pub position: Point,
+    pub orientation: Quaternion,
+}
+
+impl RosType for Pose {
+    const PACKAGE: &'static str = "geometry_msgs";
+    const NAME: &'static str = "Pose";
+}
+
+/// `geometry_msgs/PoseStamped`.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct PoseStamped {
+    pub header: Header,
+    pub pose: Pose,
+}
+
+impl RosType for PoseStamped {
+    const PACKAGE: &'static str = "geometry_msgs";
+    const NAME: &'static str = "PoseStamped";
+}
+
+/// `geometry_msgs/PoseWithCovariance`. The covariance is row-major 6×6 over
+/// (x, y, z, rotation about x, rotation about y, rotation about z).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct PoseWithCovariance {
+    pub pose: Pose,
+    #[serde(with = "fixed_array")]
+    pub covariance: [f64; 36],
+}
+
+impl Default for PoseWithCovariance {
+    fn default() -> Self {
+        PoseWithCovariance {
+            pose: Pose::default(),
+            covariance: [0.0; 36],
+        }
+    }
+}
+
+impl RosType for PoseWithCovariance {
+    const PACKAGE: &'static str = "geometry_msgs";
+    const NAME: &'static str = "PoseWithCovariance";
+}
+
+/// `geometry_msgs/PoseWithCovarianceStamped`.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct PoseWithCovarianceStamped {
+    pub header: Header,
+    pub pose: PoseWithCovariance,
+}
+
+impl RosType for PoseWithCovarianceStamped {
+    const PACKAGE: &'static str = "geometry_msgs";
+    const NAME: &'static str = "PoseWithCovarianceStamped";
+}
+
+/// `nav_msgs/Path`: poses in `header.frame_id`, in order along the path.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct Path {
+    pub header: Header,
+    pub poses: Vec<PoseStamped>,
+}
+
+impl RosType for Path {
+    const PACKAGE: &'static str = "nav_msgs";
+    const NAME: &'static str = "Path";
 }
 
 /// `sensor_msgs/Imu`. Covariances are row-major 3×3 about x, y, z; element 0 = −1 means
@@ -235,6 +332,50 @@ mod octets {
     }
 }
 
+/// serde for fixed-size arrays longer than serde's built-in 32 (`float64[36]`): a tuple of N
+/// elements, which CDR writes without a length, exactly as the IDL's array. Small enough not
+/// to warrant a dependency.
+mod fixed_array {
+    use serde::de::{Deserialize, Deserializer, Error, SeqAccess, Visitor};
+    use serde::ser::{Serialize, SerializeTuple, Serializer};
+    use std::marker::PhantomData;
+
+    pub fn serialize<S: Serializer, T: Serialize, const N: usize>(
+        a: &[T; N],
+        s: S,
+    ) -> Result<S::Ok, S::Error> {
+        let mut t = s.serialize_tuple(N)?;
+        for v in a {
+            t.serialize_element(v)?;
+        }
+        t.end()
+    }
+
+    pub fn deserialize<'de, D, T, const N: usize>(d: D) -> Result<[T; N], D::Error>
+    where
+        D: Deserializer<'de>,
+        T: Deserialize<'de> + Copy + Default,
+    {
+        struct V<T, const N: usize>(PhantomData<T>);
+        impl<'de, T: Deserialize<'de> + Copy + Default, const N: usize> Visitor<'de> for V<T, N> {
+            type Value = [T; N];
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                write!(f, "an array of {N} elements")
+            }
+            fn visit_seq<A: SeqAccess<'de>>(self, mut a: A) -> Result<[T; N], A::Error> {
+                let mut out = [T::default(); N];
+                for (i, slot) in out.iter_mut().enumerate() {
+                    *slot = a
+                        .next_element()?
+                        .ok_or_else(|| A::Error::invalid_length(i, &self))?;
+                }
+                Ok(out)
+            }
+        }
+        d.deserialize_tuple(N, V::<T, N>(PhantomData))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -355,6 +496,79 @@ mod tests {
             }],
         };
         assert_eq!(cdr::from_bytes::<DiagnosticArray>(&cdr::to_bytes(&d)), d);
+    }
+
+    /// PoseWithCovarianceStamped: the 36 covariance doubles follow the pose with no length
+    /// (a fixed IDL array), and the message round-trips.
+    #[cfg(feature = "ros2")]
+    #[test]
+    fn pose_with_covariance_cdr_layout_and_round_trip() {
+        let mut cov = [0.0; 36];
+        for (i, c) in cov.iter_mut().enumerate() {
+            *c = i as f64 * 0.5 - 3.0;
+        }
+        let m = PoseWithCovarianceStamped {
+            header: Header {
+                stamp: Time { sec: 3, nanosec: 4 },
+                frame_id: "rows".into(),
+            },
+            pose: PoseWithCovariance {
+                pose: Pose {
+                    position: Point {
+                        x: 0.0,
+                        y: 0.12,
+                        z: 0.0,
+                    },
+                    orientation: Quaternion {
+                        x: 0.0,
+                        y: 0.0,
+                        z: -0.05,
+                        w: 0.99875,
+                    },
+                },
+                covariance: cov,
+            },
+        };
+        let bytes = cdr::to_bytes(&m);
+        // header 4+4+4+"rows\0"(5) = 17, pad to 24; 3 + 4 + 36 doubles.
+        assert_eq!(bytes.len(), 24 + 8 * (3 + 4 + 36));
+        assert_eq!(&bytes[24 + 8..24 + 16], &0.12f64.to_le_bytes());
+        assert_eq!(&bytes[24 + 8 * 7..24 + 8 * 8], &(-3.0f64).to_le_bytes());
+        assert_eq!(&bytes[bytes.len() - 8..], &14.5f64.to_le_bytes());
+        assert_eq!(cdr::from_bytes::<PoseWithCovarianceStamped>(&bytes), m);
+    }
+
+    #[cfg(feature = "ros2")]
+    #[test]
+    fn path_and_float32_layout_and_round_trip() {
+        let h = Header {
+            stamp: Time { sec: 1, nanosec: 0 },
+            frame_id: "b".into(),
+        };
+        let pose = |x: f64| PoseStamped {
+            header: h.clone(),
+            pose: Pose {
+                position: Point { x, y: 0.0, z: 0.0 },
+                orientation: Quaternion {
+                    w: 1.0,
+                    ..Quaternion::default()
+                },
+            },
+        };
+        let p = Path {
+            header: h.clone(),
+            poses: vec![pose(0.0), pose(0.5), pose(1.0)],
+        };
+        let bytes = cdr::to_bytes(&p);
+        // header 4+4+4+"b\0" = 14; the sequence length at 16 (aligned to 4).
+        assert_eq!(&bytes[16..20], &3u32.to_le_bytes());
+        assert_eq!(cdr::from_bytes::<Path>(&bytes), p);
+        assert_eq!(Path::dds_name(), "nav_msgs::msg::dds_::Path_");
+
+        let f = Float32 { data: -0.125 };
+        assert_eq!(cdr::to_bytes(&f), (-0.125f32).to_le_bytes());
+        assert_eq!(cdr::from_bytes::<Float32>(&cdr::to_bytes(&f)), f);
+        assert_eq!(Float32::ros_name(), "std_msgs/msg/Float32");
     }
 
     /// CDR little-endian through RustDDS's own (de)serializer: the one that publishes.

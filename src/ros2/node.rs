@@ -8,8 +8,9 @@
 
 use super::config::Ros2Config;
 use super::error::Ros2Error;
-use super::input::{RosEstimate, RosStatus};
+use super::input::{RosEstimate, RosGuidance, RosStatus, TrackedRow};
 use crate::estimate::Estimate;
+use crate::guidance::{GuidanceEstimate, Mode};
 use crate::publish::Publisher;
 use crate::status::StatusSummary;
 
@@ -21,7 +22,81 @@ impl<'a> From<&'a Estimate> for RosEstimate<'a> {
             tilt_rad: e.tilt_rad,
             quality: e.quality,
             status: e.status.name(),
+            guidance: e.guidance.as_ref().map(RosGuidance::from),
         }
+    }
+}
+
+/// The tracked part of the guidance: all of it or, when lost, none.
+fn tracked(g: &GuidanceEstimate) -> Option<TrackedRow> {
+    Some(TrackedRow {
+        lateral_offset_m: g.lateral_offset_m?,
+        heading_rad: g.heading_rad?,
+        curvature_per_m: g.curvature_per_m?,
+        row_spacing_m: g.row_spacing_m?,
+        row_index: g.row_index?,
+        covariance: g.covariance?,
+    })
+}
+
+fn mode_name(m: Mode) -> &'static str {
+    match m {
+        Mode::BetweenRows => "between_rows",
+        Mode::OverRow => "over_row",
+    }
+}
+
+impl<'a> From<&'a GuidanceEstimate> for RosGuidance<'a> {
+    fn from(g: &'a GuidanceEstimate) -> Self {
+        RosGuidance {
+            tracking: g.tracking.name(),
+            mode: mode_name(g.mode),
+            tracked: tracked(g),
+            roll_rad: g.roll_rad,
+            end_of_row_m: g.end_of_row_m,
+            warnings: &g.warnings,
+        }
+    }
+}
+
+/// The latest frame's guidance, kept for the once-a-second `/diagnostics` (its warnings'
+/// buffer reused: keeping it allocates nothing once warmed up).
+#[cfg(feature = "ros2")]
+#[derive(Debug, Clone, Default, PartialEq)]
+pub(super) struct LatestGuidance {
+    present: bool,
+    tracking: &'static str,
+    mode: &'static str,
+    tracked: Option<TrackedRow>,
+    roll_rad: Option<f64>,
+    end_of_row_m: Option<f64>,
+    warnings: Vec<crate::guidance::Warning>,
+}
+
+#[cfg(feature = "ros2")]
+impl LatestGuidance {
+    pub(super) fn set(&mut self, g: Option<&GuidanceEstimate>) {
+        self.present = g.is_some();
+        self.warnings.clear();
+        if let Some(g) = g {
+            self.tracking = g.tracking.name();
+            self.mode = mode_name(g.mode);
+            self.tracked = tracked(g);
+            self.roll_rad = g.roll_rad;
+            self.end_of_row_m = g.end_of_row_m;
+            self.warnings.extend_from_slice(&g.warnings);
+        }
+    }
+
+    pub(super) fn get(&self) -> Option<RosGuidance<'_>> {
+        self.present.then_some(RosGuidance {
+            tracking: self.tracking,
+            mode: self.mode,
+            tracked: self.tracked,
+            roll_rad: self.roll_rad,
+            end_of_row_m: self.end_of_row_m,
+            warnings: &self.warnings,
+        })
     }
 }
 
@@ -49,29 +124,39 @@ impl<'a> RosStatus<'a> {
 }
 
 /// The ROS 2 publisher for the node's publisher list, or `None` when `[ros2]` is disabled.
-/// `hardware_id` names the source in `/diagnostics` (camera model and serial, recording).
+/// `hardware_id` names the source in `/diagnostics` (camera model and serial, recording);
+/// `tool_point_m` is the row guidance's (`[guidance] tool_point_m`; `[0, 0]` without
+/// guidance), from which `row_pose` moves the offset to base_link.
 pub fn node_publisher(
     config: &Ros2Config,
     hardware_id: &str,
+    tool_point_m: [f64; 2],
 ) -> Result<Option<Box<dyn Publisher>>, Ros2Error> {
     if !config.enabled {
         return Ok(None);
     }
     config.validate()?;
-    build(config, hardware_id)
+    build(config, hardware_id, tool_point_m)
 }
 
 #[cfg(not(feature = "ros2"))]
-fn build(_: &Ros2Config, _: &str) -> Result<Option<Box<dyn Publisher>>, Ros2Error> {
+fn build(_: &Ros2Config, _: &str, _: [f64; 2]) -> Result<Option<Box<dyn Publisher>>, Ros2Error> {
     Err(Ros2Error::NotBuilt)
 }
 
 #[cfg(feature = "ros2")]
-fn build(config: &Ros2Config, hardware_id: &str) -> Result<Option<Box<dyn Publisher>>, Ros2Error> {
+fn build(
+    config: &Ros2Config,
+    hardware_id: &str,
+    tool_point_m: [f64; 2],
+) -> Result<Option<Box<dyn Publisher>>, Ros2Error> {
+    let mut inner = super::Ros2Publisher::new(config)?;
+    inner.set_tool_point(tool_point_m);
     Ok(Some(Box::new(with_feature::NodePublisher {
-        inner: super::Ros2Publisher::new(config)?,
+        inner,
         hardware_id: hardware_id.to_string(),
         last_status: "starting",
+        guidance: LatestGuidance::default(),
     })))
 }
 
@@ -86,8 +171,9 @@ mod with_feature {
     pub(super) struct NodePublisher {
         pub(super) inner: super::super::Ros2Publisher,
         pub(super) hardware_id: String,
-        /// Status of the latest estimate, for `/diagnostics`.
+        /// Status and guidance of the latest estimate, for `/diagnostics`.
         pub(super) last_status: &'static str,
+        pub(super) guidance: LatestGuidance,
     }
 
     fn err(e: impl std::fmt::Display) -> PublishError {
@@ -108,6 +194,7 @@ mod with_feature {
             frame: Option<&Arc<Frame>>,
         ) -> Result<(), PublishError> {
             self.last_status = estimate.status.name();
+            self.guidance.set(estimate.guidance.as_ref());
             self.inner
                 .publish_estimate(&RosEstimate::from(estimate))
                 .map_err(err)?;
@@ -120,7 +207,7 @@ mod with_feature {
 
         fn status(&mut self, status: &StatusSummary) {
             let s = RosStatus::from_summary(status, self.last_status, &self.hardware_id);
-            if let Err(e) = self.inner.publish_status(&s) {
+            if let Err(e) = self.inner.publish_status(&s, self.guidance.get().as_ref()) {
                 tracing::warn!("ROS 2 diagnostics: {e}");
             }
         }
@@ -161,6 +248,61 @@ mod tests {
             (Some(0.25), Some(-0.01), 0.4)
         );
         assert_eq!(r.status, "degraded");
+        assert_eq!(r.guidance, None);
+    }
+
+    #[test]
+    fn guidance_maps_whole_or_not_at_all() {
+        use crate::guidance::{TrackState, Warning};
+        let mut g = GuidanceEstimate {
+            mode: Mode::OverRow,
+            tracking: TrackState::Coasting,
+            lateral_offset_m: Some(0.07),
+            heading_rad: Some(-0.01),
+            curvature_per_m: Some(0.002),
+            row_spacing_m: Some(0.75),
+            row_index: Some(-1),
+            covariance: Some([
+                [1e-4, 0.0, 0.0, 0.0],
+                [0.0, 2e-6, 0.0, 0.0],
+                [0.0; 4],
+                [0.0; 4],
+            ]),
+            roll_rad: Some(0.01),
+            warnings: vec![Warning::RowsTilted],
+            ..GuidanceEstimate::default()
+        };
+        let r = RosGuidance::from(&g);
+        assert_eq!((r.tracking, r.mode), ("coasting", "over_row"));
+        let t = r.tracked.unwrap();
+        assert_eq!(
+            (
+                t.lateral_offset_m,
+                t.heading_rad,
+                t.curvature_per_m,
+                t.row_spacing_m,
+                t.row_index
+            ),
+            (0.07, -0.01, 0.002, 0.75, -1)
+        );
+        assert_eq!(t.covariance[1][1], 2e-6);
+        assert_eq!(r.roll_rad, Some(0.01));
+        assert_eq!(r.warnings, &[Warning::RowsTilted]);
+
+        #[cfg(feature = "ros2")]
+        {
+            let mut latest = LatestGuidance::default();
+            assert_eq!(latest.get(), None);
+            latest.set(Some(&g));
+            assert_eq!(latest.get(), Some(r));
+            latest.set(None);
+            assert_eq!(latest.get(), None);
+        }
+        // lost: nothing tracked, even if a field were left behind
+        g.tracking = TrackState::Lost;
+        g.covariance = None;
+        let r = RosGuidance::from(&g);
+        assert_eq!((r.tracking, r.tracked), ("lost", None));
     }
 
     #[test]
@@ -194,13 +336,13 @@ mod tests {
     #[test]
     fn disabled_gives_no_publisher_and_a_bad_config_an_error() {
         let off = Ros2Config::default();
-        assert!(node_publisher(&off, "x").unwrap().is_none());
+        assert!(node_publisher(&off, "x", [0.0; 2]).unwrap().is_none());
         let bad = Ros2Config {
             enabled: true,
             namespace: "no_slash".into(),
             ..Ros2Config::default()
         };
-        let e = node_publisher(&bad, "x").err().unwrap();
+        let e = node_publisher(&bad, "x", [0.0; 2]).err().unwrap();
         assert!(e.to_string().contains("ros2.namespace"), "{e}");
     }
 
@@ -211,7 +353,7 @@ mod tests {
             enabled: true,
             ..Ros2Config::default()
         };
-        let e = node_publisher(&on, "x").err().unwrap();
+        let e = node_publisher(&on, "x", [0.0; 2]).err().unwrap();
         assert!(e.to_string().contains("--features ros2"), "{e}");
     }
 }

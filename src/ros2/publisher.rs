@@ -15,13 +15,22 @@
 //! | `<ns>/orientation` | `sensor_msgs/msg/Imu` | `[ros2.qos]`, sensor data by default |
 //! | `<ns>/heading_tilt` | `geometry_msgs/msg/Vector3Stamped` | `[ros2.qos]` |
 //! | `<ns>/image_raw` | `sensor_msgs/msg/Image` | `[ros2.qos]`; only if `image_rate_hz` > 0 |
+//! | `<ns>/row_pose` | `geometry_msgs/msg/PoseWithCovarianceStamped` | `[ros2.qos]` |
+//! | `<ns>/row_path` | `nav_msgs/msg/Path` | `[ros2.qos]` |
+//! | `<ns>/row_offset` | `std_msgs/msg/Float32` | `[ros2.qos]` |
+//! | `<ns>/row_heading_error` | `std_msgs/msg/Float32` | `[ros2.qos]` |
 //! | `/diagnostics` | `diagnostic_msgs/msg/DiagnosticArray` | reliable, keep last 10 |
+//!
+//! The `row_*` topics carry the row guidance's tracked estimate; a frame without one (guidance
+//! lost or disabled) publishes nothing on them.
 
 use super::config::{Reliability, Ros2Config};
 use super::convert::{ImageThrottle, MessageBuilder};
 use super::error::Ros2Error;
-use super::input::{RosEstimate, RosStatus};
-use super::msg::{DiagnosticArray, Image, Imu, RosType, Vector3Stamped};
+use super::input::{RosEstimate, RosGuidance, RosStatus};
+use super::msg::{
+    DiagnosticArray, Float32, Image, Imu, Path, PoseWithCovarianceStamped, RosType, Vector3Stamped,
+};
 use crate::frame::ImageView;
 use ros2_client::dds::rustdds::DomainParticipantBuilder;
 use ros2_client::qos::{Durability, History, WhenFull};
@@ -50,6 +59,10 @@ pub struct PublishCounts {
     pub heading_tilt: u64,
     pub diagnostics: u64,
     pub images: u64,
+    pub row_pose: u64,
+    pub row_path: u64,
+    /// `row_offset` and `row_heading_error` pairs.
+    pub row_follow: u64,
     /// Samples a reliable writer refused because its send window was full.
     pub would_block: u64,
 }
@@ -65,6 +78,10 @@ pub struct Ros2Publisher {
     // Field order is drop order: writers first, then the node, then the participant.
     orientation: Writer<Imu>,
     heading_tilt: Writer<Vector3Stamped>,
+    row_pose: Writer<PoseWithCovarianceStamped>,
+    row_path: Writer<Path>,
+    row_offset: Writer<Float32>,
+    row_heading_error: Writer<Float32>,
     diagnostics: Writer<DiagnosticArray>,
     image: Option<Writer<Image>>,
     builder: MessageBuilder,
@@ -132,6 +149,10 @@ impl Ros2Publisher {
         let ns = config.namespace.as_str();
         let orientation = writer::<Imu>(&mut node, ns, "orientation", &frame_qos)?;
         let heading_tilt = writer::<Vector3Stamped>(&mut node, ns, "heading_tilt", &frame_qos)?;
+        let row_pose = writer::<PoseWithCovarianceStamped>(&mut node, ns, "row_pose", &frame_qos)?;
+        let row_path = writer::<Path>(&mut node, ns, "row_path", &frame_qos)?;
+        let row_offset = writer::<Float32>(&mut node, ns, "row_offset", &frame_qos)?;
+        let row_heading_error = writer::<Float32>(&mut node, ns, "row_heading_error", &frame_qos)?;
         let diagnostics =
             writer::<DiagnosticArray>(&mut node, "/", "diagnostics", &diagnostics_qos)?;
         let image = if config.image_rate_hz > 0.0 {
@@ -148,6 +169,10 @@ impl Ros2Publisher {
         Ok(Ros2Publisher {
             orientation,
             heading_tilt,
+            row_pose,
+            row_path,
+            row_offset,
+            row_heading_error,
             diagnostics,
             image,
             builder: MessageBuilder::new(config),
@@ -173,6 +198,10 @@ impl Ros2Publisher {
         let mut t = vec![
             self.orientation.topic.clone(),
             self.heading_tilt.topic.clone(),
+            self.row_pose.topic.clone(),
+            self.row_path.topic.clone(),
+            self.row_offset.topic.clone(),
+            self.row_heading_error.topic.clone(),
             self.diagnostics.topic.clone(),
         ];
         if let Some(i) = &self.image {
@@ -186,9 +215,17 @@ impl Ros2Publisher {
         self.counts
     }
 
-    /// Publishes one frame's estimate on `orientation` and `heading_tilt`. Returns false,
-    /// publishing nothing, when the estimate has no heading or no tilt.
+    /// The row guidance's tool point (base_link x, y, metres; see
+    /// [`MessageBuilder::with_tool_point`]).
+    pub fn set_tool_point(&mut self, tool_point_m: [f64; 2]) {
+        self.builder = self.builder.clone().with_tool_point(tool_point_m);
+    }
+
+    /// Publishes one frame's estimate: `orientation` and `heading_tilt` when it has heading
+    /// and tilt, the `row_*` topics when its guidance has a tracked estimate. Returns whether
+    /// the frame had heading and tilt.
     pub fn publish_estimate(&mut self, e: &RosEstimate) -> Result<bool, Ros2Error> {
+        self.publish_rows(e)?;
         let (Some(imu), Some(ht)) = (self.builder.imu(e)?, self.builder.heading_tilt(e)?) else {
             return Ok(false);
         };
@@ -201,19 +238,52 @@ impl Ros2Publisher {
         Ok(true)
     }
 
-    /// Publishes the status summary on `/diagnostics`, stamped with the wall clock. The node
-    /// calls it once a second.
-    pub fn publish_status(&mut self, s: &RosStatus) -> Result<(), Ros2Error> {
+    /// `row_pose`, `row_path`, `row_offset` and `row_heading_error` of a frame with a tracked
+    /// guidance estimate; nothing otherwise.
+    fn publish_rows(&mut self, e: &RosEstimate) -> Result<(), Ros2Error> {
+        let block = &mut self.counts.would_block;
+        if let Some(m) = self.builder.row_pose(e)? {
+            if send(&self.row_pose, m, block)? {
+                self.counts.row_pose += 1;
+            }
+        }
+        if let Some(m) = self.builder.row_path(e)? {
+            if send(&self.row_path, m, block)? {
+                self.counts.row_path += 1;
+            }
+        }
+        if let Some((offset, heading)) = MessageBuilder::row_follow(e) {
+            let a = send(&self.row_offset, offset, block)?;
+            if send(&self.row_heading_error, heading, block)? && a {
+                self.counts.row_follow += 1;
+            }
+        }
+        Ok(())
+    }
+
+    /// Publishes the status summary on `/diagnostics` with the latest frame's guidance (its
+    /// own status, `<node>: guidance`), stamped with the wall clock. The node calls it once a
+    /// second.
+    pub fn publish_status(
+        &mut self,
+        s: &RosStatus,
+        guidance: Option<&RosGuidance>,
+    ) -> Result<(), Ros2Error> {
         let now_ns = std::time::SystemTime::now()
             .duration_since(std::time::UNIX_EPOCH)
             .map(|d| d.as_nanos() as u64)
             .unwrap_or(0);
-        self.publish_status_at(s, now_ns)
+        self.publish_status_at(s, guidance, now_ns)
     }
 
     /// As [`Self::publish_status`], stamped `now_ns` (nanoseconds since the UNIX epoch).
-    pub fn publish_status_at(&mut self, s: &RosStatus, now_ns: u64) -> Result<(), Ros2Error> {
-        let d = self.builder.diagnostics(s, now_ns)?;
+    pub fn publish_status_at(
+        &mut self,
+        s: &RosStatus,
+        guidance: Option<&RosGuidance>,
+        now_ns: u64,
+    ) -> Result<(), Ros2Error> {
+        let d = self.builder.diagnostics(s, guidance, now_ns)?;
         if send(&self.diagnostics, d, &mut self.counts.would_block)? {
             self.counts.diagnostics += 1;
         }

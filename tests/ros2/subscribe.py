@@ -94,6 +94,50 @@ class Image_(IdlStruct, typename="sensor_msgs::msg::dds_::Image_"):
 
 
 @dataclass
+class Float32_(IdlStruct, typename="std_msgs::msg::dds_::Float32_"):
+    data: t.float32
+
+
+@dataclass
+class Point_(IdlStruct, typename="geometry_msgs::msg::dds_::Point_"):
+    x: t.float64
+    y: t.float64
+    z: t.float64
+
+
+@dataclass
+class Pose_(IdlStruct, typename="geometry_msgs::msg::dds_::Pose_"):
+    position: Point_
+    orientation: Quaternion_
+
+
+@dataclass
+class PoseStamped_(IdlStruct, typename="geometry_msgs::msg::dds_::PoseStamped_"):
+    header: Header_
+    pose: Pose_
+
+
+@dataclass
+class PoseWithCovariance_(IdlStruct, typename="geometry_msgs::msg::dds_::PoseWithCovariance_"):
+    pose: Pose_
+    covariance: t.array[t.float64, 36]
+
+
+@dataclass
+class PoseWithCovarianceStamped_(
+    IdlStruct, typename="geometry_msgs::msg::dds_::PoseWithCovarianceStamped_"
+):
+    header: Header_
+    pose: PoseWithCovariance_
+
+
+@dataclass
+class Path_(IdlStruct, typename="nav_msgs::msg::dds_::Path_"):
+    header: Header_
+    poses: t.sequence[PoseStamped_]
+
+
+@dataclass
 class KeyValue_(IdlStruct, typename="diagnostic_msgs::msg::dds_::KeyValue_"):
     key: str
     value: str
@@ -140,7 +184,28 @@ def header(h):
     return {"stamp": [h.stamp.sec, h.stamp.nanosec], "frame_id": h.frame_id}
 
 
+def pose(p):
+    return {
+        "position": [p.position.x, p.position.y, p.position.z],
+        "orientation": [p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w],
+    }
+
+
 def decode(kind, m):
+    if kind == "row_pose":
+        return {
+            "header": header(m.header),
+            "pose": pose(m.pose.pose),
+            "covariance": list(m.pose.covariance),
+        }
+    if kind == "row_path":
+        return {
+            "header": header(m.header),
+            "poses": [{"header": header(p.header), "pose": pose(p.pose)} for p in m.poses],
+        }
+    if kind in ("row_offset", "row_heading_error"):
+        # The float32's bit pattern too, for an exact comparison.
+        return {"data": m.data, "bits": struct.unpack("<I", struct.pack("<f", m.data))[0]}
     if kind == "orientation":
         q = m.orientation
         return {
@@ -213,7 +278,8 @@ def main():
         action="append",
         default=[],
         metavar="KIND=N",
-        help="orientation, heading_tilt, diagnostics, image_raw or discovery",
+        help="orientation, heading_tilt, row_pose, row_path, row_offset, row_heading_error, "
+        "diagnostics, image_raw or discovery",
     )
     args = ap.parse_args()
 
@@ -222,6 +288,10 @@ def main():
         "orientation": (f"rt{ns}/orientation", Imu_),
         "heading_tilt": (f"rt{ns}/heading_tilt", Vector3Stamped_),
         "image_raw": (f"rt{ns}/image_raw", Image_),
+        "row_pose": (f"rt{ns}/row_pose", PoseWithCovarianceStamped_),
+        "row_path": (f"rt{ns}/row_path", Path_),
+        "row_offset": (f"rt{ns}/row_offset", Float32_),
+        "row_heading_error": (f"rt{ns}/row_heading_error", Float32_),
         "diagnostics": ("rt/diagnostics", DiagnosticArray_),
         "discovery": ("ros_discovery_info", ParticipantEntitiesInfo_),
     }
@@ -242,6 +312,10 @@ def main():
         "orientation": Qos(frame_rel, Policy.History.KeepLast(50)),
         "heading_tilt": Qos(frame_rel, Policy.History.KeepLast(50)),
         "image_raw": Qos(frame_rel, Policy.History.KeepLast(10)),
+        "row_pose": Qos(frame_rel, Policy.History.KeepLast(50)),
+        "row_path": Qos(frame_rel, Policy.History.KeepLast(50)),
+        "row_offset": Qos(frame_rel, Policy.History.KeepLast(50)),
+        "row_heading_error": Qos(frame_rel, Policy.History.KeepLast(50)),
         "diagnostics": Qos(
             Policy.Reliability.Reliable(duration(seconds=1)), Policy.History.KeepLast(10)
         ),
