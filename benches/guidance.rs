@@ -39,7 +39,13 @@ fn bench(c: &mut Criterion) {
             b.iter(|| {
                 let (vp, normals) = &frames[(i % 64) as usize];
                 i += 1;
-                guidance.update(i * 66_666_667, Some(*vp), normals.iter().copied(), &mut out);
+                guidance.update(
+                    i * 66_666_667,
+                    Some(*vp),
+                    normals.iter().copied(),
+                    None,
+                    &mut out,
+                );
                 black_box(out.lateral_offset_m)
             })
         });
@@ -56,6 +62,7 @@ fn bench(c: &mut Criterion) {
                 heading_sd_rad: 0.002,
                 spacing_m: 0.5,
                 spacing_sd_m: 0.003,
+                curvature: Some((0.01, 0.005)),
             };
             black_box(tracker.update(i * 66_666_667, Some(&m)))
         })

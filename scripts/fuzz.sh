@@ -43,8 +43,9 @@ seed_dir() { [ -d "$seeds/$1" ] && echo "$seeds/$1"; }
 if d=$(seed_dir calibration_toml); then cp config/calib/*.toml config/calibration.example.toml "$d"/; fi
 if d=$(seed_dir ocamcalib_parse); then cp config/calib/ocamcalib/*.txt "$d"/; fi
 if d=$(seed_dir node_config); then cp config/omnirow.toml "$d"/; fi
-# Hand-written seeds: ROS camera_info files (both forms) and HTTP requests.
-for t in camera_info http_request; do
+# Seeds kept in fuzz/seeds/: ROS camera_info files (both forms), HTTP requests, recordings
+# with zstd and lz4 chunks (written by mcap's own writer).
+for t in camera_info http_request mcap_replay; do
   if d=$(seed_dir $t); then cp fuzz/seeds/$t/* "$d"/; fi
 done
 if d=$(seed_dir mcap_replay); then

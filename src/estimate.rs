@@ -10,7 +10,7 @@
 
 use crate::detect::{Detection, Method};
 use crate::frame::Frame;
-use crate::guidance::{Guidance, GuidanceEstimate};
+use crate::guidance::{CurvatureMeasurement, Guidance, GuidanceEstimate};
 use serde::{Deserialize, Serialize};
 
 /// The version of the [`Estimate`] JSON schema. Bumped on any incompatible change.
@@ -71,6 +71,10 @@ pub struct TruthEstimate {
     /// The field's row spacing, metres (schema 2).
     #[serde(default)]
     pub row_spacing_m: f64,
+    /// Curvature of row 0, 1/m, positive bending left (schema 2; 0: straight rows): the line
+    /// at world y bends by `c / (1 − c·y)` ([`Self::path_curvature_per_m`]).
+    #[serde(default)]
+    pub curvature_per_m: f64,
 }
 
 impl TruthEstimate {
@@ -78,6 +82,12 @@ impl TruthEstimate {
     /// between rows `path` and `path + 1`), metres, positive to the left.
     pub fn path_offset_m(&self, path: i64) -> f64 {
         self.camera_lateral_m - (path as f64 + 0.5) * self.row_spacing_m
+    }
+
+    /// Curvature of the centre line of the inter-row path `path`, 1/m, positive bending left.
+    pub fn path_curvature_per_m(&self, path: i64) -> f64 {
+        let c = self.curvature_per_m;
+        c / (1.0 - c * (path as f64 + 0.5) * self.row_spacing_m)
     }
 
     /// The inter-row path the camera is in.
@@ -120,6 +130,11 @@ pub struct Estimate {
     /// Row guidance (schema 2), when the node runs it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub guidance: Option<GuidanceEstimate>,
+    /// The rows' curvature measured from this frame's points by the detector worker
+    /// ([`crate::pipeline::Processor::ground_curvature`]), on its way to row guidance in the
+    /// publisher; not published itself (guidance's `frame.curvature_per_m` is).
+    #[serde(skip)]
+    pub ground_curvature: Option<CurvatureMeasurement>,
 }
 
 impl Estimate {
@@ -179,8 +194,10 @@ impl Estimate {
                 lateral_offset_m: t.lateral_offset_m,
                 camera_lateral_m: t.camera_lateral_m,
                 row_spacing_m: t.row_spacing_m,
+                curvature_per_m: t.curvature_per_m,
             }),
             guidance: None,
+            ground_curvature: None,
         }
     }
 
@@ -203,6 +220,7 @@ impl Estimate {
             error: None,
             truth: None,
             guidance: None,
+            ground_curvature: None,
         }
     }
 
@@ -218,6 +236,7 @@ impl Estimate {
             self.capture_ns,
             vp,
             self.rows.iter().map(|r| r.normal),
+            self.ground_curvature.as_ref(),
             &mut out,
         );
         self.guidance = Some(out);

@@ -142,6 +142,11 @@ pub struct GroundTruth {
     pub camera_lateral_m: f64,
     pub row_spacing_m: f64,
     pub plant_distance_m: f64,
+    /// Curvature of row 0 (the field's, 1/m, positive bending left; 0: straight rows). The
+    /// rows are concentric: the line at world y bends by `c / (1 − c·y)`. In a curved field
+    /// the row normals are those of the rows' tangent lines at the camera.
+    #[serde(default)]
+    pub curvature_per_m: f64,
     /// Noise settings used to render the image.
     pub noise: NoiseTruth,
     /// Plane normal of every row visible in the image (sign free).

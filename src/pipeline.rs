@@ -45,6 +45,15 @@ pub trait Processor: Send {
         view: &ImageView,
         out: &mut Detection,
     ) -> Result<(), Box<dyn std::error::Error + Send + Sync>>;
+
+    /// The rows' curvature from the points of the image just processed into `det`, for row
+    /// guidance (a detector with a [`crate::guidance::CurvatureFit`]); `None` by default.
+    fn ground_curvature(
+        &mut self,
+        _det: &Detection,
+    ) -> Option<crate::guidance::CurvatureMeasurement> {
+        None
+    }
 }
 
 /// Pipeline settings.
@@ -607,7 +616,11 @@ fn detect(
     };
     let ms = t.elapsed().as_secs_f64() * 1e3;
     match result {
-        Ok(()) => Estimate::from_detection(frame, det, ms, min_quality),
+        Ok(()) => {
+            let mut est = Estimate::from_detection(frame, det, ms, min_quality);
+            est.ground_curvature = proc.ground_curvature(det);
+            est
+        }
         Err(e) => {
             sh.count_detector_error();
             tracing::warn!(seq = frame.seq, "detector: {e}");

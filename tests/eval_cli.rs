@@ -62,10 +62,16 @@ fn eval_writes_tables_plots_and_outcomes() {
     ] {
         assert!(md.contains(needle), "missing {needle} in\n{md}");
     }
-    for lens in ["fisheye185", "pal"] {
-        let png = image::open(out.join(format!("detection_rate_{lens}.png"))).unwrap();
+    for file in [
+        "detection_rate_fisheye185.png",
+        "detection_rate_pal.png",
+        "table1.png",
+        "table2.png",
+    ] {
+        let png = image::open(out.join(file)).unwrap();
         assert_eq!((png.width(), png.height()), omnirow::eval::chart::SIZE);
     }
+    assert!(md.contains("](table1.png)") && md.contains("](table2.png)"));
     let lines = outcomes(&out);
     // 2 Table I images + 3 distances x 2 lenses x 1 + 2 lenses x 1 Table II image, one method.
     assert_eq!(lines.len(), 2 + 6 + 2);

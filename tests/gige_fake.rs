@@ -214,6 +214,7 @@ fn injected_synthetic_field_gives_the_true_heading_and_tilt() {
         offset_amplitude_m: 0.1,
         period_s: 0.02,
         cross_at_s: 0.0,
+        curvature_per_m: 0.0,
         render_threads: 0,
     })
     .unwrap();

@@ -57,6 +57,12 @@ fn published_offset_and_heading_match_the_drive_truth() {
             e.seq
         );
         assert!((g.row_spacing_m.unwrap() - t.row_spacing_m).abs() < 0.01);
+        // straight rows: the curvature stays near 0 (radius beyond 200 m)
+        assert!(
+            g.curvature_per_m.unwrap().abs() < 0.005,
+            "frame {}: {g:?}",
+            e.seq
+        );
         assert!(!g.rows.is_empty());
         assert!(g.warnings.is_empty(), "{:?}", g.warnings);
         let p = g.covariance.unwrap();
@@ -67,6 +73,51 @@ fn published_offset_and_heading_match_the_drive_truth() {
     let max = errs[errs.len() - 1];
     // issue 14's targets: mean <= 1 cm, p99 <= 3 cm (here: the largest of 45)
     assert!(mean < 0.01 && max < 0.03, "mean {mean} max {max}");
+}
+
+#[test]
+fn curvature_of_a_curved_drive_matches_its_radius() {
+    // rows bending left with a 20 m radius (row 0), the robot weaving between rows 0 and 1
+    let dir = tmpdir("curved");
+    let cfg = dir.join("omnirow.toml");
+    std::fs::write(
+        &cfg,
+        "[source.synthetic]\nwidth = 408\nheight = 342\nfps = 30.0\nseed = 5\ncurvature_per_m = 0.05\n\n[http]\nenabled = false\n",
+    )
+    .unwrap();
+    let (sock, addr) = udp();
+    let mut child = bin()
+        .args(["run", "--frames", "30", "--no-print", "--udp"])
+        .arg(&addr)
+        .arg("--config")
+        .arg(&cfg)
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let est = collect(&sock, &mut child, Duration::from_secs(120));
+    assert!(child.wait_with_output().unwrap().status.success());
+    assert_eq!(est.len(), 30);
+    for e in &est {
+        let g = e.guidance.as_ref().unwrap();
+        let t = e.truth.as_ref().unwrap();
+        assert_eq!(t.curvature_per_m, 0.05);
+        assert_eq!(g.tracking, TrackState::Tracking, "frame {}", e.seq);
+        // the followed line is the centre of path 0: 0.25 m left of row 0
+        let truth = t.path_curvature_per_m(0);
+        assert!((truth - 0.05 / (1.0 - 0.05 * 0.25)).abs() < 1e-12);
+        let k = g.curvature_per_m.unwrap();
+        // issue 14's target: within 10% for radii of 20 m and more
+        assert!(
+            (k / truth - 1.0).abs() < 0.1,
+            "frame {}: {k} vs {truth}",
+            e.seq
+        );
+        let f = g.frame.unwrap().curvature_per_m.unwrap();
+        assert!((f / truth - 1.0).abs() < 0.1, "frame {}: {f}", e.seq);
+        // the filter's curvature variance comes from the measurements
+        let p = g.covariance.unwrap();
+        assert!(p[2][2].sqrt() < 0.005, "{p:?}");
+    }
 }
 
 #[test]

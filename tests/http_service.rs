@@ -66,17 +66,32 @@ fn endpoints_serve_health_status_history_metrics_and_overlay() {
         "omnirow_latency_ms{quantile=\"0.5\"} ",
         "omnirow_source_state{state=\"streaming\"} 1",
         "omnirow_pipeline_alive 1",
+        "# TYPE omnirow_guidance_tracking gauge",
+        "omnirow_guidance_tracking{state=\"coasting\"} ",
+        "omnirow_guidance_lateral_offset_m ",
+        "omnirow_guidance_heading_error_rad ",
+        "omnirow_guidance_row_spacing_m ",
+        "# TYPE omnirow_guidance_state_changes_total counter",
+        "omnirow_guidance_state_changes_total{to=\"tracking\"} ",
     ] {
         assert!(text.contains(m), "missing `{m}` in\n{text}");
     }
+    // One tracking state is the current one.
+    let current: Vec<&str> = text
+        .lines()
+        .filter(|l| l.starts_with("omnirow_guidance_tracking{") && l.ends_with(" 1"))
+        .collect();
+    assert_eq!(current.len(), 1, "{text}");
 
     let (code, head, png) = node.get("/overlay.png");
     assert_eq!(code, 200);
     assert_eq!(header(&head, "content-type").unwrap(), "image/png");
     let img = image::load_from_memory(&png).unwrap().to_rgb8();
     assert_eq!((img.width(), img.height()), (408, 342));
-    // Rows are drawn in red over the image.
+    // Rows are drawn in red over the image, the followed line in cyan.
     assert!(img.pixels().any(|p| p.0 == [255, 32, 32]), "no row drawn");
+    let followed = img.pixels().filter(|p| p.0 == [0, 230, 255]).count();
+    assert!(followed > 100, "{followed} pixels of the followed line");
 
     let (code, head, body) = node.get("/");
     assert_eq!(code, 200);
@@ -126,6 +141,16 @@ fn metrics_parse_with_the_prometheus_parser() {
     );
     assert!(stdout.contains("omnirow_frames_in counter"), "{stdout}");
     assert!(stdout.contains("omnirow_latency_ms summary"), "{stdout}");
+    // The guidance's series: a state set, its numbers, and the changes (4 states each).
+    for family in [
+        "omnirow_guidance_tracking gauge 4",
+        "omnirow_guidance_lateral_offset_m gauge 1",
+        "omnirow_guidance_heading_error_rad gauge 1",
+        "omnirow_guidance_row_spacing_m gauge 1",
+        "omnirow_guidance_state_changes counter 4",
+    ] {
+        assert!(stdout.contains(family), "no `{family}` in {stdout}");
+    }
 }
 
 /// Opens a connection that sends the start of a request and then nothing.

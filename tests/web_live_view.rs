@@ -1,6 +1,8 @@
 //! The live view in a real browser: headless Chromium (Debian's `chromium`, installed by
 //! .ci/run) loads `/` from a running `omnirow run`, and the test checks that the numbers the
-//! page shows are those of `/status` and that the frame and the plot render. The node runs the
+//! page shows (heading, tilt, quality, the guidance's offset, tracking state, spacing and row
+//! index) are those of `/status` and that the frame (with the followed line) and the plot
+//! render. The node runs the
 //! synthetic drive standing still, so every estimate is the same and the page and `/status`
 //! can be compared whenever each was read.
 
@@ -135,11 +137,24 @@ fn live_view_shows_the_status_numbers_frame_and_plot() {
             "#{id} shows {shown}, /status says {want}"
         );
     }
-    // The guidance's lateral offset in centimetres, or a dash while the node has none.
-    match latest["guidance"]["lateral_offset_m"].as_f64() {
-        Some(m) => assert!((number(&dom, "offset") - m * 100.0).abs() <= 0.051),
-        None => assert_eq!(text_of(&dom, "offset"), "–"),
-    }
+    // The guidance (on by default): the robot stands still between two rows, so the tracker
+    // follows the same path from the first frames on, and the page shows its numbers.
+    let g = &latest["guidance"];
+    assert_eq!(g["tracking"], "tracking", "guidance: {g}");
+    assert_eq!(text_of(&dom, "tracking"), "tracking");
+    let offset_m = g["lateral_offset_m"]
+        .as_f64()
+        .expect("an offset while tracking");
+    let shown = number(&dom, "offset");
+    assert!(
+        (shown - offset_m * 100.0).abs() <= 0.051,
+        "#offset shows {shown} cm, /status says {offset_m} m"
+    );
+    let spacing_m = g["row_spacing_m"]
+        .as_f64()
+        .expect("a spacing while tracking");
+    assert!((number(&dom, "spacing") - spacing_m * 100.0).abs() <= 0.051);
+    assert_eq!(number(&dom, "row-index"), g["row_index"].as_f64().unwrap());
     let fps = number(&dom, "fps");
     // Up to 15 fps; a loaded machine may detect fewer.
     assert!(fps > 1.0 && fps < 20.0, "fps shown {fps}");
@@ -168,6 +183,22 @@ fn live_view_shows_the_status_numbers_frame_and_plot() {
     };
     assert!(has([0xff, 0x9f, 0x1c]) > 50, "no heading line in the plot");
     assert!(has([0x2e, 0xc4, 0xb6]) > 50, "no quality line in the plot");
+    // The plot's offset line, and the followed line drawn over the frame (cyan).
+    assert!(has([0xc7, 0x7d, 0xff]) > 50, "no offset line in the plot");
+    let followed = img
+        .enumerate_pixels()
+        .filter(|(x, _, p)| {
+            *x < 800
+                && p.0
+                    .iter()
+                    .zip([0u8, 230, 255])
+                    .all(|(a, b)| a.abs_diff(b) <= 40)
+        })
+        .count();
+    assert!(
+        followed > 100,
+        "only {followed} pixels of the followed line"
+    );
     // The frame is in colour: many pixels with a clear hue in the picture's area (left half).
     let coloured = img
         .enumerate_pixels()

@@ -12,10 +12,12 @@ use crate::camera::{Calibration, IdealLens};
 use crate::config::Config;
 use crate::detect::{Detection, Detector};
 use crate::frame::ImageView;
-use crate::guidance::Guidance;
+use crate::guidance::{CurvatureFit, CurvatureMeasurement, CurvatureOptions, Guidance};
 use crate::notify::Notifier;
 use crate::pipeline::{Pipeline, Processor};
 use crate::publish::http::{HttpServer, OverlayFn};
+use crate::publish::metrics::{TrackingCounter, TrackingCounts};
+use crate::publish::overlay::overlay_png;
 use crate::publish::stdout::{StdoutMode, StdoutPublisher};
 use crate::publish::udp::{UdpOptions, UdpPublisher};
 use crate::publish::Publisher;
@@ -182,8 +184,9 @@ fn camera_source(_: &crate::gige::GigeConfig) -> anyhow::Result<Box<dyn Source>>
     )
 }
 
-/// The detector as the pipeline's processing step.
-struct DetectorWorker(Detector);
+/// The detector as the pipeline's processing step, with the rows' curvature fit when row
+/// guidance runs.
+struct DetectorWorker(Detector, Option<CurvatureFit>);
 
 impl Processor for DetectorWorker {
     fn process(
@@ -192,6 +195,18 @@ impl Processor for DetectorWorker {
         out: &mut Detection,
     ) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
         self.0.process(view, out).map_err(Into::into)
+    }
+
+    fn ground_curvature(&mut self, det: &Detection) -> Option<CurvatureMeasurement> {
+        let fit = self.1.as_mut()?;
+        let vp = det.vanishing_point?.direction;
+        let p = self.0.points();
+        fit.measure(
+            &vp.into(),
+            det.rows.iter().map(|r| r.normal.into()),
+            &p.rays,
+            &p.weights,
+        )
     }
 }
 
@@ -259,8 +274,12 @@ pub fn run(args: RunArgs, record_to: Option<PathBuf>) -> anyhow::Result<ExitCode
     let opts = cfg.detector.clone();
     let mut processors: Vec<Box<dyn Processor>> = Vec::new();
     for _ in 0..cfg.workers {
+        let fit = cfg
+            .guidance
+            .map(|_| CurvatureFit::new(cal.mounting, CurvatureOptions::default()));
         processors.push(Box::new(DetectorWorker(
             Detector::new(&cal, opts.clone()).context("detector")?,
+            fit,
         )));
     }
 
@@ -293,6 +312,12 @@ pub fn run(args: RunArgs, record_to: Option<PathBuf>) -> anyhow::Result<ExitCode
             "publishing on ROS 2"
         );
         publishers.push(p);
+    }
+
+    // The guidance's tracking-state changes for /metrics, counted on every estimate.
+    let tracking_counts = Arc::new(TrackingCounts::default());
+    if cfg.http.is_some() {
+        publishers.push(Box::new(TrackingCounter(tracking_counts.clone())));
     }
 
     // A recording that cannot start does not stop detection: the node runs, says so on
@@ -330,7 +355,7 @@ pub fn run(args: RunArgs, record_to: Option<PathBuf>) -> anyhow::Result<ExitCode
             let overlay: OverlayFn = Arc::new(move |l: &Latest| overlay_png(&overlay_cal, l));
             // The estimates matter more than the endpoint: a busy port is a loud warning,
             // not a node that will not start.
-            match HttpServer::start(addr, shared.clone(), overlay) {
+            match HttpServer::start(addr, shared.clone(), overlay, tracking_counts) {
                 Ok(h) => Some(h),
                 Err(e) => {
                     tracing::error!(%addr, "HTTP endpoint not started: {e} (http.listen)");
@@ -428,32 +453,4 @@ pub fn run(args: RunArgs, record_to: Option<PathBuf>) -> anyhow::Result<ExitCode
         );
     }
     Ok(ExitCode::SUCCESS)
-}
-
-/// The overlay of the latest frame as PNG: rows and vanishing point drawn over the image.
-fn overlay_png(cal: &Calibration, l: &Latest) -> Result<Vec<u8>, String> {
-    let view = l.frame.view().map_err(|e| e.to_string())?;
-    let view_cal = if cal.size() == (view.height, view.width) {
-        cal.clone()
-    } else {
-        cal.rescaled_to(view.height, view.width)?
-    };
-    let mut rgb = Vec::new();
-    crate::detect::overlay::draw_overlay(&view, &view_cal, &l.detection, &mut rgb)
-        .map_err(|e| e.to_string())?;
-    let mut png = Vec::new();
-    let enc = image::codecs::png::PngEncoder::new_with_quality(
-        &mut png,
-        image::codecs::png::CompressionType::Fast,
-        image::codecs::png::FilterType::Sub,
-    );
-    use image::ImageEncoder;
-    enc.write_image(
-        &rgb,
-        view.width,
-        view.height,
-        image::ExtendedColorType::Rgb8,
-    )
-    .map_err(|e| e.to_string())?;
-    Ok(png)
 }

@@ -1,8 +1,9 @@
 //! Writes an evaluation's results: Markdown tables beside the paper's figures, PNG plots of
 //! the detection rate against plant distance, and the raw outcomes as JSON lines.
 
-use super::chart::{Chart, Series};
+use super::chart::{Chart, Kind, Series};
 use super::run::{EvalResults, Experiment};
+use crate::camera::IdealLens;
 use crate::detect::Method;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -105,6 +106,12 @@ pub fn markdown(r: &EvalResults, command: &str) -> String {
             p(2)
         );
     }
+    if table1_chart(r).is_some() {
+        let _ = writeln!(
+            s,
+            "\n![Table I: mean error, omnirow's beside the paper's](table1.png)"
+        );
+    }
     table1_leafy(&mut s, r);
     let _ = writeln!(
         s,
@@ -166,6 +173,12 @@ pub fn markdown(r: &EvalResults, command: &str) -> String {
         let _ = writeln!(s, " {}/{}{} |", sum.0, sum.1, paper);
     }
     table2_bounds(r, &mut s);
+    if table2_chart(r).is_some() {
+        let _ = writeln!(
+            s,
+            "\n![Table II: failures per 100 images, omnirow's beside the paper's counts](table2.png)"
+        );
+    }
     let _ = writeln!(
         s,
         "\n## Speed\n\nDetector time per image (not counting rendering), over every image of the run.\n\n| method | median (ms) | p99 (ms) |\n|---|---|---|"
@@ -247,9 +260,145 @@ pub fn detection_chart(r: &EvalResults, lens: usize) -> Chart {
                 label: m.name().into(),
                 colour: colour(m),
                 points: r.detection_rate(lens, m),
+                kind: Kind::Line,
             })
             .collect(),
+        x_categories: Vec::new(),
     }
+}
+
+/// The methods of the run that the paper's tables have a figure for, in the run's order.
+fn paper_methods(r: &EvalResults) -> Vec<Method> {
+    r.methods
+        .iter()
+        .copied()
+        .filter(|m| PAPER_TABLE1.iter().any(|p| p.0 == *m))
+        .collect()
+}
+
+/// A y range from 0 with room above the highest point for the legend.
+fn headroom<'a>(points: impl Iterator<Item = &'a (f64, f64)>) -> (f64, f64) {
+    let top = points
+        .map(|p| p.1)
+        .filter(|v| v.is_finite())
+        .fold(0.0, f64::max);
+    (0.0, if top > 0.0 { top * 1.5 } else { 1.0 })
+}
+
+/// Table I as a chart: the mean angle between the found and the true vanishing point per
+/// method, this run's (filled circles) beside the paper's (hollow triangles). `None` when the
+/// run has no Table I images or no method the paper reports.
+pub fn table1_chart(r: &EvalResults) -> Option<Chart> {
+    let methods = paper_methods(r);
+    if methods.is_empty() || methods.iter().all(|&m| r.accuracy(m).images == 0) {
+        return None;
+    }
+    let at = |i: usize, dx: f64| i as f64 + dx;
+    let ours: Vec<(f64, f64)> = methods
+        .iter()
+        .enumerate()
+        .filter_map(|(i, &m)| {
+            let a = r.accuracy(m);
+            (a.found > 0).then(|| (at(i, -0.1), a.errors.mean * 1e3))
+        })
+        .collect();
+    let paper: Vec<(f64, f64)> = methods
+        .iter()
+        .enumerate()
+        .filter_map(|(i, &m)| {
+            let p = PAPER_TABLE1.iter().find(|p| p.0 == m)?;
+            Some((at(i, 0.1), p.1))
+        })
+        .collect();
+    let y_range = Some(headroom(ours.iter().chain(&paper)));
+    Some(Chart {
+        title: "Table I: mean error of the vanishing point".into(),
+        x_label: "method".into(),
+        y_label: "mean error (1e-3 rad)".into(),
+        x_range: None,
+        y_range,
+        x_categories: methods.iter().map(|m| m.name().to_string()).collect(),
+        series: vec![
+            Series {
+                label: "omnirow".into(),
+                colour: [30, 80, 220],
+                points: ours,
+                kind: Kind::Markers,
+            },
+            Series {
+                label: "paper (Table I)".into(),
+                colour: [20, 20, 20],
+                points: paper,
+                kind: Kind::Reference,
+            },
+        ],
+    })
+}
+
+/// Table II as a chart: failures per method and lens, this run's scaled to 100 images per
+/// lens (filled circles) beside the paper's counts (hollow triangles; the paper does not
+/// state its image count). `None` when the run has no Table II images.
+pub fn table2_chart(r: &EvalResults) -> Option<Chart> {
+    let methods = paper_methods(r);
+    let lenses = r.lens_names.len().min(2);
+    if methods.is_empty()
+        || (0..lenses).all(|l| methods.iter().all(|&m| r.failures(l, m).images == 0))
+    {
+        return None;
+    }
+    // The paper's lenses as omnirow's built-in models: the fisheye, then the catadioptric
+    // ("omni"); the paper's figures are shown only beside those.
+    let paper_lenses = [IdealLens::Fisheye185.name(), IdealLens::Pal.name()];
+    let lens_colours = [[220, 40, 40], [30, 80, 220]];
+    let mut series = Vec::new();
+    for (l, &c) in lens_colours.iter().enumerate().take(lenses) {
+        let name = &r.lens_names[l];
+        let dx = if l == 0 { -0.12 } else { 0.12 };
+        series.push(Series {
+            label: format!("omnirow, {name} (per 100 images)"),
+            colour: c,
+            points: methods
+                .iter()
+                .enumerate()
+                .filter_map(|(i, &m)| {
+                    let f = r.failures(l, m);
+                    (f.images > 0).then(|| {
+                        (
+                            i as f64 + dx - 0.04,
+                            100.0 * f.failures as f64 / f.images as f64,
+                        )
+                    })
+                })
+                .collect(),
+            kind: Kind::Markers,
+        });
+        if name != paper_lenses[l] {
+            continue;
+        }
+        series.push(Series {
+            label: format!("paper, {} (Table II)", ["fisheye", "omni"][l]),
+            colour: c,
+            points: methods
+                .iter()
+                .enumerate()
+                .filter_map(|(i, &m)| {
+                    let p = PAPER_TABLE2.iter().find(|p| p.0 == m)?;
+                    Some((i as f64 + dx + 0.04, [p.1, p.2][l] as f64))
+                })
+                .collect(),
+            kind: Kind::Reference,
+        });
+    }
+    let y_range = Some(headroom(series.iter().flat_map(|s| &s.points)));
+    Some(Chart {
+        title: "Table II: failures under heavy noise".into(),
+        x_label: "method".into(),
+        y_label: "failures".into(),
+        x_range: None,
+        y_range,
+        x_categories: methods.iter().map(|m| m.name().to_string()).collect(),
+        series,
+    })
 }
 
 /// Writes `README.md`, one PNG per lens and `outcomes.jsonl` into `dir`.
@@ -263,13 +412,21 @@ pub fn write(r: &EvalResults, dir: &Path, command: &str) -> Result<Vec<PathBuf>,
     let md = dir.join("README.md");
     std::fs::write(&md, markdown(r, command)).map_err(io(&md))?;
     written.push(md);
-    for (l, name) in r.lens_names.iter().enumerate() {
-        let png = dir.join(format!("detection_rate_{name}.png"));
+    let mut charts: Vec<(String, Chart)> = r
+        .lens_names
+        .iter()
+        .enumerate()
+        .map(|(l, name)| (format!("detection_rate_{name}.png"), detection_chart(r, l)))
+        .collect();
+    charts.extend(table1_chart(r).map(|c| ("table1.png".to_string(), c)));
+    charts.extend(table2_chart(r).map(|c| ("table2.png".to_string(), c)));
+    for (file, chart) in charts {
+        let png = dir.join(file);
         let other = |e: &dyn std::fmt::Display| ReportError {
             path: png.clone(),
             source: std::io::Error::other(e.to_string()),
         };
-        detection_chart(r, l)
+        chart
             .render()
             .map_err(|e| other(&e))?
             .save(&png)
@@ -298,4 +455,66 @@ pub fn write(r: &EvalResults, dir: &Path, command: &str) -> Result<Vec<PathBuf>,
     std::fs::write(&jl, lines).map_err(io(&jl))?;
     written.push(jl);
     Ok(written)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::eval::run::Outcome;
+
+    fn outcome(experiment: Experiment, lens: usize, method: Method, err: f64) -> Outcome {
+        Outcome {
+            experiment,
+            lens,
+            method,
+            seed: 1,
+            plant_distance_m: 0.1,
+            noise: 0.1,
+            weeds: 0,
+            vp_error_rad: Some(err),
+            rows_found: 4,
+            rows_correct: 4,
+            detect_ms: 1.0,
+        }
+    }
+
+    #[test]
+    fn table_charts_put_the_papers_figures_beside_the_runs() {
+        let mut outcomes = Vec::new();
+        for l in 0..2 {
+            outcomes.push(outcome(Experiment::Table1, l, Method::Hough, 2e-4));
+            outcomes.push(outcome(Experiment::Table2, l, Method::Hough, 1e-4));
+            // a failure: 10° off
+            outcomes.push(outcome(Experiment::Table2, l, Method::Hough, 0.17));
+        }
+        let r = EvalResults {
+            outcomes,
+            lens_names: vec!["fisheye185".into(), "pal".into()],
+            methods: vec![Method::Hough, Method::Pencil],
+            plant_distances: vec![0.1],
+            pass_deg: 1.0,
+        };
+        let t1 = table1_chart(&r).unwrap();
+        // Pencil is not in the paper: one category
+        assert_eq!(t1.x_categories, ["hough"]);
+        assert_eq!(t1.series[0].kind, Kind::Markers);
+        assert!((t1.series[0].points[0].1 - 0.2).abs() < 1e-9);
+        assert_eq!(t1.series[1].kind, Kind::Reference);
+        assert_eq!(t1.series[1].points[0].1, 0.036);
+        let t2 = table2_chart(&r).unwrap();
+        let y = |i: usize| t2.series[i].points[0].1;
+        // one failure in two images per lens: 50 per 100; the paper's 18 and 48
+        assert_eq!((y(0), y(1), y(2), y(3)), (50.0, 18.0, 50.0, 48.0));
+        assert_eq!(t2.series[3].kind, Kind::Reference);
+        // a lens of the user's own: no paper figure beside it
+        let mut own = r.clone();
+        own.lens_names[1] = "my_lens".into();
+        assert_eq!(table2_chart(&own).unwrap().series.len(), 3);
+        // no Table I images: no chart
+        let none = EvalResults {
+            outcomes: Vec::new(),
+            ..r
+        };
+        assert!(table1_chart(&none).is_none() && table2_chart(&none).is_none());
+    }
 }

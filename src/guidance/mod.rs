@@ -12,11 +12,13 @@
 
 pub mod comb;
 pub mod config;
+pub mod curvature;
 pub mod ground;
 pub mod tracker;
 
 pub use comb::{fit_comb, fit_comb_with_roll, Comb, CombOptions};
 pub use config::GuidanceConfig;
+pub use curvature::{CurvatureFit, CurvatureMeasurement, CurvatureOptions};
 pub use ground::GroundFrame;
 pub use tracker::{Measurement, TrackState, Tracked, Tracker, TrackerOptions};
 
@@ -211,6 +213,10 @@ pub struct FrameGuidance {
     pub lateral_offset_m: f64,
     pub heading_rad: f64,
     pub row_spacing_m: f64,
+    /// Curvature of the nearest line of the followed kind, 1/m, positive bending left, from
+    /// the rows' points on the ground; `None` when the frame's points did not give one.
+    #[serde(default)]
+    pub curvature_per_m: Option<f64>,
     /// Weighted RMS distance of the rows from the comb, metres.
     pub comb_rms_m: f64,
     pub rows_used: usize,
@@ -360,12 +366,14 @@ impl Guidance {
 
     /// Folds in one frame, in capture order: its capture time, the rows' vanishing point and
     /// the rows' plane normals (camera frame; `vp` `None` when the frame has no usable
-    /// vanishing point). Writes the published guidance into `out` (its buffers reused).
+    /// vanishing point), and the curvature the frame's points gave ([`CurvatureFit`], run
+    /// where the points are). Writes the published guidance into `out` (its buffers reused).
     pub fn update(
         &mut self,
         t_ns: u64,
         vp: Option<[f64; 3]>,
         normals: impl IntoIterator<Item = [f64; 3]>,
+        curvature: Option<&CurvatureMeasurement>,
         out: &mut GuidanceEstimate,
     ) {
         out.mode = self.opts.mode;
@@ -374,7 +382,7 @@ impl Guidance {
         out.frame = None;
         out.roll_rad = None;
         out.end_of_row_m = None;
-        let measured = vp.and_then(|vp| self.measure(&Vector3::from(vp), normals, out));
+        let measured = vp.and_then(|vp| self.measure(&Vector3::from(vp), normals, curvature, out));
         let m = measured.map(|(m, _)| m);
         let r = self.tracker.update(t_ns, m.as_ref());
         out.tracking = r.state;
@@ -421,6 +429,7 @@ impl Guidance {
         &mut self,
         vp: &Vector3<f64>,
         normals: impl IntoIterator<Item = [f64; 3]>,
+        curvature: Option<&CurvatureMeasurement>,
         out: &mut GuidanceEstimate,
     ) -> Option<(Measurement, FrameInfo)> {
         let o = &self.opts;
@@ -467,6 +476,9 @@ impl Guidance {
             Mode::BetweenRows => c + s / 2.0,
         };
         let offset = -(line - (line / s - 0.5).ceil() * s);
+        // the followed kind's nearest line, left of the camera's foot point
+        let curvature =
+            curvature.map(|m| (m.at_lateral(g.point_lateral_m(&tool) - offset), m.sd_per_m));
         let dir = g.along - g.up * g.along.dot(&g.up);
         let dir = dir / dir.norm();
         for (y, k) in self.ys.iter().zip(&self.index) {
@@ -485,6 +497,7 @@ impl Guidance {
             lateral_offset_m: offset,
             heading_rad: g.heading_rad(),
             row_spacing_m: s,
+            curvature_per_m: curvature.map(|c| c.0),
             comb_rms_m: comb.rms_m,
             rows_used: comb.rows_used,
         });
@@ -501,6 +514,7 @@ impl Guidance {
                 heading_sd_rad: o.heading_sd_rad,
                 spacing_m: s,
                 spacing_sd_m: spacing_sd,
+                curvature,
             },
             FrameInfo {
                 measured_spacing_m: comb.measured_spacing_m,
@@ -623,7 +637,7 @@ mod tests {
             let mut g = Guidance::new(opts, Mounting::default()).unwrap();
             let (vp, normals) = view(yaw, pitch, 0.0, cam_y, 1.0, 0.5, -6..=6);
             let mut out = GuidanceEstimate::default();
-            g.update(1, Some(vp), normals, &mut out);
+            g.update(1, Some(vp), normals, None, &mut out);
             let f = out.frame.unwrap();
             let line = if over_row { 0.0 } else { 0.25 };
             let truth = wrap(cam_y - line, 0.5);
@@ -653,7 +667,7 @@ mod tests {
         let yaw: f64 = 0.2;
         let (vp, normals) = view(yaw, 0.0, 0.0, 0.1, 1.0, 0.5, -5..=5);
         let mut out = GuidanceEstimate::default();
-        g.update(1, Some(vp), normals, &mut out);
+        g.update(1, Some(vp), normals, None, &mut out);
         // the tool's world y: camera y + R(yaw)·(1, 0.1)
         let tool_y = 0.1 + yaw.sin() * 1.0 + yaw.cos() * 0.1;
         let f = out.frame.unwrap();
@@ -669,7 +683,7 @@ mod tests {
         let mut g = Guidance::new(GuidanceOptions::default(), Mounting::default()).unwrap();
         let (vp, normals) = view(0.0, 0.0, roll, 0.3, 1.0, 0.5, -5..=5);
         let mut out = GuidanceEstimate::default();
-        g.update(1, Some(vp), normals, &mut out);
+        g.update(1, Some(vp), normals, None, &mut out);
         let r = out.roll_rad.unwrap();
         assert!((r - roll).abs() < 1e-4, "{r}");
         let f = out.frame.unwrap();
@@ -684,6 +698,7 @@ mod tests {
             1,
             Some(vp),
             view(0.0, 0.0, roll, 0.3, 1.0, 0.5, -5..=5).1,
+            None,
             &mut out,
         );
         assert!(out.roll_rad.is_none());
@@ -695,13 +710,13 @@ mod tests {
         let mut g = Guidance::new(GuidanceOptions::default(), Mounting::default()).unwrap();
         let mut out = GuidanceEstimate::default();
         let (vp, normals) = view(0.0, 0.0, 0.0, 0.3, 1.0, 0.5, -5..=5);
-        g.update(1, Some(vp), normals, &mut out);
+        g.update(1, Some(vp), normals, None, &mut out);
         assert!(!out.rows.is_empty());
-        g.update(100_000_000, None, [], &mut out);
+        g.update(100_000_000, None, [], None, &mut out);
         assert_eq!(out.tracking, TrackState::Coasting);
         assert!(out.rows.is_empty() && out.frame.is_none());
         assert!(out.lateral_offset_m.is_some());
-        g.update(2_000_000_000, Some(vp), [[1.0, 0.0, 0.0]], &mut out);
+        g.update(2_000_000_000, Some(vp), [[1.0, 0.0, 0.0]], None, &mut out);
         assert_eq!(out.tracking, TrackState::Lost);
         assert!(out.lateral_offset_m.is_none() && out.rows.is_empty());
     }
@@ -717,14 +732,14 @@ mod tests {
         let mut out = GuidanceEstimate::default();
         for i in 0..10u64 {
             let (vp, normals) = view(0.0, 0.0, 0.0, 0.3, 1.2, 0.5, -5..=5);
-            g.update(1 + i * 66_000_000, Some(vp), normals, &mut out);
+            g.update(1 + i * 66_000_000, Some(vp), normals, None, &mut out);
         }
         assert_eq!(out.warnings, vec![Warning::SpacingDiffersFromConfigured]);
         // right height: no warning
         let mut g = Guidance::new(opts, Mounting::default()).unwrap();
         for i in 0..10u64 {
             let (vp, normals) = view(0.0, 0.0, 0.0, 0.3, 1.0, 0.5, -5..=5);
-            g.update(1 + i * 66_000_000, Some(vp), normals, &mut out);
+            g.update(1 + i * 66_000_000, Some(vp), normals, None, &mut out);
         }
         assert!(out.warnings.is_empty(), "{:?}", out.warnings);
     }

@@ -63,7 +63,8 @@ pub struct TrackerOptions {
     pub spacing_rate_sd: f64,
     /// Standard deviation of the curvature when the filter starts, 1/m.
     pub initial_curvature_sd: f64,
-    /// χ² gate on the innovation of (offset, heading, spacing); 3 degrees of freedom.
+    /// χ² gate on the innovation of (offset, heading, spacing); 3 degrees of freedom. The
+    /// curvature has its own gate at the same tail probability (1 degree of freedom).
     pub gate_chi2: f64,
     /// Longest time without a usable measurement before `lost`, seconds.
     pub coast_s: f64,
@@ -95,6 +96,9 @@ pub struct Measurement {
     pub heading_sd_rad: f64,
     pub spacing_m: f64,
     pub spacing_sd_m: f64,
+    /// The followed line's curvature and its standard deviation, 1/m, when the frame
+    /// measured it (folded in after the rest, with its own gate).
+    pub curvature: Option<(f64, f64)>,
 }
 
 /// The tracked estimate after a frame.
@@ -198,14 +202,47 @@ impl Tracker {
     }
 
     fn start(&mut self, t_ns: u64, m: &Measurement) {
-        self.x = Vector4::new(m.offset_m, m.heading_rad, 0.0, m.spacing_m);
+        let (k, k_sd) = m
+            .curvature
+            .filter(|(_, sd)| *sd < self.opts.initial_curvature_sd)
+            .unwrap_or((0.0, self.opts.initial_curvature_sd));
+        self.x = Vector4::new(m.offset_m, m.heading_rad, k, m.spacing_m);
         self.p = Matrix4::from_diagonal(&Vector4::new(
             m.offset_sd_m.powi(2),
             m.heading_sd_rad.powi(2),
-            self.opts.initial_curvature_sd.powi(2),
+            k_sd.powi(2),
             m.spacing_sd_m.powi(2).max(1e-8),
         ));
         self.t_ns = t_ns;
+    }
+
+    /// χ²(1) with the same tail probability as `gate_chi2` has for χ²(3), through the
+    /// Wilson–Hilferty cube-root normal approximation (χ²(k)/k ≈ (1 − 2/9k + z·√(2/9k))³).
+    fn gate_chi2_1(&self) -> f64 {
+        let g = self.opts.gate_chi2;
+        let z = ((g / 3.0).cbrt() - (1.0 - 2.0 / 27.0)) / (2.0f64 / 27.0).sqrt();
+        (1.0 - 2.0 / 9.0 + z * (2.0f64 / 9.0).sqrt())
+            .max(0.0)
+            .powi(3)
+    }
+
+    /// Gates and folds in a curvature measurement `k` with standard deviation `sd`; false
+    /// when the gate rejects it.
+    fn correct_curvature(&mut self, k: f64, sd: f64) -> bool {
+        let s = self.p[(2, 2)] + sd * sd;
+        let y = k - self.x[2];
+        if !(s > 0.0 && y * y / s <= self.gate_chi2_1()) {
+            return false;
+        }
+        let gain = self.p.column(2) / s;
+        self.x += gain * y;
+        // Joseph form with H = e₂ᵀ: (I − K·H)·P·(I − K·H)ᵀ + K·r·Kᵀ
+        let mut ikh = Matrix4::<f64>::identity();
+        for i in 0..4 {
+            ikh[(i, 2)] -= gain[i];
+        }
+        self.p = ikh * self.p * ikh.transpose() + gain * gain.transpose() * (sd * sd);
+        true
     }
 
     fn predict(&mut self, dt: f64) {
@@ -255,6 +292,9 @@ impl Tracker {
         // Joseph form keeps P symmetric and positive
         let ikh = Matrix4::identity() - k * h;
         self.p = ikh * self.p * ikh.transpose() + k * r * k.transpose();
+        if let Some((k, sd)) = m.curvature {
+            self.correct_curvature(k, sd);
+        }
         true
     }
 }
@@ -271,6 +311,7 @@ mod tests {
             heading_sd_rad: 0.002,
             spacing_m: 0.5,
             spacing_sd_m: 0.003,
+            curvature: None,
         }
     }
 
@@ -382,5 +423,35 @@ mod tests {
         let r = t.update(1 + 200_000_000, None);
         let x = r.x.unwrap();
         assert!((x[0] + 0.2 * 0.05f64.sin()).abs() < 1e-9, "{}", x[0]);
+    }
+
+    #[test]
+    fn curvature_measurements_converge_and_outliers_are_gated() {
+        let mut t = Tracker::new(TrackerOptions::default());
+        let dt = 66_666_667u64;
+        let mut rng = crate::synth::Rng::new(3);
+        let mut last = 0.0;
+        for i in 0..60u64 {
+            let m = Measurement {
+                curvature: Some((0.02 + 0.004 * rng.normal(), 0.004)),
+                ..meas(0.05, 0.0)
+            };
+            let r = t.update(1 + i * dt, Some(&m));
+            assert_eq!(r.state, TrackState::Tracking);
+            last = r.x.unwrap()[2];
+        }
+        assert!((last - 0.02).abs() < 0.002, "{last}");
+        let sd = t.p[(2, 2)].sqrt();
+        assert!(sd < 0.004, "{sd}");
+        // a wild curvature is refused; the frame's offset is still taken
+        let m = Measurement {
+            curvature: Some((0.3, 0.004)),
+            ..meas(0.05, 0.0)
+        };
+        let r = t.update(1 + 60 * dt, Some(&m));
+        assert_eq!(r.state, TrackState::Tracking);
+        assert!((r.x.unwrap()[2] - 0.02).abs() < 0.003);
+        // the χ²(1) gate matches χ²(3)'s 99.9 % tail: about 10.8
+        assert!((t.gate_chi2_1() - 10.83).abs() < 0.3, "{}", t.gate_chi2_1());
     }
 }

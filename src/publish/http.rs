@@ -1,6 +1,7 @@
 //! The HTTP service: `/healthz`, `/metrics` (Prometheus text format), `/status` (JSON),
 //! `/history.json` (the last minute of estimates), `/overlay.png` (the latest frame in colour
-//! with its rows and vanishing point drawn) and `/`, the live view (docs/http.md).
+//! with its rows, vanishing point and followed line drawn: [`super::overlay`]) and `/`, the
+//! live view (docs/http.md).
 //!
 //! Built on hyper (HTTP/1.1) over a tokio runtime confined to this service's thread: one
 //! thread drives every connection concurrently, and a single blocking thread draws overlays,
@@ -13,7 +14,7 @@
 //! that serving and drawing use only the CPU time the pipeline leaves over.
 
 use super::live::{History, StatusDocument};
-use super::metrics::metrics;
+use super::metrics::{metrics, TrackingCounts};
 use crate::check::{Check, Raw};
 use crate::source::SourceState;
 use crate::status::{Latest, Shared};
@@ -103,13 +104,15 @@ pub struct HttpServer {
 }
 
 impl HttpServer {
-    /// Binds `addr` and serves with the default [`HttpOptions`] in a thread.
+    /// Binds `addr` and serves with the default [`HttpOptions`] in a thread. `tracking` is
+    /// what a [`super::metrics::TrackingCounter`] among the pipeline's publishers counts.
     pub fn start(
         addr: SocketAddr,
         shared: Arc<Shared>,
         overlay: OverlayFn,
+        tracking: Arc<TrackingCounts>,
     ) -> Result<Self, HttpError> {
-        Self::start_with(addr, shared, overlay, HttpOptions::default())
+        Self::start_with(addr, shared, overlay, tracking, HttpOptions::default())
     }
 
     /// Binds `addr` and serves with `options` in a thread named `http`.
@@ -117,6 +120,7 @@ impl HttpServer {
         addr: SocketAddr,
         shared: Arc<Shared>,
         overlay: OverlayFn,
+        tracking: Arc<TrackingCounts>,
         options: HttpOptions,
     ) -> Result<Self, HttpError> {
         let runtime = tokio::runtime::Builder::new_current_thread()
@@ -136,7 +140,7 @@ impl HttpServer {
         };
         let addr = listener.local_addr().map_err(bind)?;
         let (stop, stopped) = oneshot::channel();
-        let service = Arc::new(Service::new(shared, overlay, &options));
+        let service = Arc::new(Service::new(shared, overlay, tracking, &options));
         let thread = std::thread::Builder::new()
             .name("http".into())
             .spawn(move || {
@@ -261,6 +265,7 @@ type Body = Full<Bytes>;
 struct Service {
     shared: Arc<Shared>,
     overlay: OverlayFn,
+    tracking: Arc<TrackingCounts>,
     history: History,
     /// The PNG of the latest frame drawn so far (sequence number, bytes): one drawing per
     /// frame however many clients ask, and one at a time.
@@ -268,10 +273,16 @@ struct Service {
 }
 
 impl Service {
-    fn new(shared: Arc<Shared>, overlay: OverlayFn, options: &HttpOptions) -> Self {
+    fn new(
+        shared: Arc<Shared>,
+        overlay: OverlayFn,
+        tracking: Arc<TrackingCounts>,
+        options: &HttpOptions,
+    ) -> Self {
         Service {
             shared,
             overlay,
+            tracking,
             history: History::new(options.history_window),
             overlay_cache: tokio::sync::Mutex::new(None),
         }
@@ -291,7 +302,7 @@ impl Service {
             "/metrics" => respond(
                 StatusCode::OK,
                 "text/plain; version=0.0.4; charset=utf-8",
-                Bytes::from(metrics(&self.shared)),
+                Bytes::from(metrics(&self.shared, &self.tracking)),
             ),
             "/status" => json(&StatusDocument::now(&self.shared)),
             "/history.json" => json(&self.history.document()),

@@ -1,10 +1,83 @@
 //! The Prometheus text exposition (format 0.0.4) of the pipeline's state, served on the HTTP
 //! service's `/metrics`: counters, gauges and latency summaries, one family per metric with
 //! its `# HELP` and `# TYPE` lines. Checked against the Prometheus project's own parser in
-//! tests/http_service.rs.
+//! tests/http_service.rs. Also owns [`TrackingCounts`], the guidance's tracking-state changes
+//! counted on every published estimate by the [`TrackingCounter`] publisher (the HTTP service
+//! only sees the latest estimate, which would miss changes between two scrapes).
 
+use super::{PublishError, Publisher};
+use crate::estimate::Estimate;
+use crate::frame::Frame;
+use crate::guidance::TrackState;
 use crate::source::SourceState;
 use crate::status::Shared;
+use std::sync::atomic::{AtomicU64, AtomicU8, Ordering};
+use std::sync::Arc;
+
+/// The guidance's tracking states, in the order of [`TrackingCounts`]' counters.
+const TRACK_STATES: [TrackState; 4] = [
+    TrackState::Tracking,
+    TrackState::Coasting,
+    TrackState::Lost,
+    TrackState::Reacquired,
+];
+
+/// No state seen yet.
+const NO_STATE: u8 = u8::MAX;
+
+/// How often the guidance's tracking state changed, by the state it changed to. Written by
+/// one [`TrackingCounter`], read by any number of `/metrics` requests.
+#[derive(Debug)]
+pub struct TrackingCounts {
+    last: AtomicU8,
+    entered: [AtomicU64; 4],
+}
+
+impl Default for TrackingCounts {
+    fn default() -> Self {
+        TrackingCounts {
+            last: AtomicU8::new(NO_STATE),
+            entered: Default::default(),
+        }
+    }
+}
+
+impl TrackingCounts {
+    /// Folds in one published estimate: a change of its guidance's tracking state from the
+    /// previous estimate's is counted (the first state seen is not a change). Estimates
+    /// without guidance (e.g. `camera_lost`) leave the state as it was.
+    pub fn observe(&self, e: &Estimate) {
+        let Some(g) = &e.guidance else {
+            return;
+        };
+        let Some(i) = TRACK_STATES.iter().position(|s| *s == g.tracking) else {
+            return;
+        };
+        let previous = self.last.swap(i as u8, Ordering::Relaxed);
+        if previous != NO_STATE && previous as usize != i {
+            self.entered[i].fetch_add(1, Ordering::Relaxed);
+        }
+    }
+
+    /// The changes into each state so far.
+    pub fn changes(&self) -> [(TrackState, u64); 4] {
+        std::array::from_fn(|i| (TRACK_STATES[i], self.entered[i].load(Ordering::Relaxed)))
+    }
+}
+
+/// The publisher that counts the tracking-state changes for `/metrics`.
+pub struct TrackingCounter(pub Arc<TrackingCounts>);
+
+impl Publisher for TrackingCounter {
+    fn name(&self) -> &str {
+        "tracking-counter"
+    }
+
+    fn publish(&mut self, e: &Estimate, _frame: Option<&Arc<Frame>>) -> Result<(), PublishError> {
+        self.0.observe(e);
+        Ok(())
+    }
+}
 
 /// A sample value as the exposition format spells it (`NaN`, `+Inf`, `-Inf`, or a number).
 fn sample_value(v: f64) -> String {
@@ -19,8 +92,9 @@ fn sample_value(v: f64) -> String {
     }
 }
 
-/// The Prometheus text exposition of the pipeline's state.
-pub fn metrics(shared: &Shared) -> String {
+/// The Prometheus text exposition of the pipeline's state and of the guidance's tracking
+/// `changes`.
+pub fn metrics(shared: &Shared, changes: &TrackingCounts) -> String {
     use std::fmt::Write as _;
     let s = shared.status();
     let mut m = String::new();
@@ -168,13 +242,106 @@ pub fn metrics(shared: &Shared) -> String {
             "Sequence number of the latest published frame.",
             &plain(e.seq as f64),
         );
+        if let Some(g) = &e.guidance {
+            metric(
+                "omnirow_guidance_tracking",
+                "gauge",
+                "The guidance's tracking state in the latest estimate (1 for the current one).",
+                &TRACK_STATES
+                    .iter()
+                    .map(|st| {
+                        (
+                            format!("{{state=\"{}\"}}", st.name()),
+                            f64::from(u8::from(*st == g.tracking)),
+                        )
+                    })
+                    .collect::<Vec<_>>(),
+            );
+            for (name, help, v) in [
+                (
+                    "omnirow_guidance_lateral_offset_m",
+                    "Lateral offset of the tool point from the followed line, metres, positive to the left (NaN when lost).",
+                    g.lateral_offset_m,
+                ),
+                (
+                    "omnirow_guidance_heading_error_rad",
+                    "Heading of the rows in the robot frame (the guidance's heading_rad), radians, counter-clockwise (NaN when lost).",
+                    g.heading_rad,
+                ),
+                (
+                    "omnirow_guidance_row_spacing_m",
+                    "Row spacing, metres (NaN when lost).",
+                    g.row_spacing_m,
+                ),
+                (
+                    "omnirow_guidance_curvature_per_m",
+                    "Curvature of the followed line, 1/m, positive to the left (NaN when lost).",
+                    g.curvature_per_m,
+                ),
+                (
+                    "omnirow_guidance_row_index",
+                    "Index of the followed line relative to the line nearest the tool point (NaN when lost).",
+                    g.row_index.map(|i| i as f64),
+                ),
+            ] {
+                metric(name, "gauge", help, &plain(opt(v)));
+            }
+        }
     }
+    metric(
+        "omnirow_guidance_state_changes_total",
+        "counter",
+        "Changes of the guidance's tracking state, by the state changed to.",
+        &changes
+            .changes()
+            .iter()
+            .map(|(st, n)| (format!("{{to=\"{}\"}}", st.name()), *n as f64))
+            .collect::<Vec<_>>(),
+    );
     m
 }
 
 #[cfg(test)]
 mod tests {
-    use super::sample_value;
+    use super::*;
+
+    fn estimate(tracking: Option<TrackState>) -> Estimate {
+        let mut e: Estimate = serde_json::from_value(serde_json::json!({
+            "schema_version": 2, "seq": 1, "capture_ns": 0, "receive_ns": 0, "publish_ns": 0,
+            "latency_ms": 1.0, "detector_ms": 1.0, "status": "ok", "heading_rad": 0.0,
+            "tilt_rad": 0.0, "vanishing_point": [1.0, 0.0, 0.0], "rows": [], "quality": 0.5
+        }))
+        .unwrap();
+        e.guidance = tracking.map(|t| crate::guidance::GuidanceEstimate {
+            tracking: t,
+            ..Default::default()
+        });
+        e
+    }
+
+    #[test]
+    fn tracking_changes_are_counted_by_the_state_entered() {
+        use TrackState::*;
+        let c = TrackingCounts::default();
+        for t in [
+            Some(Lost),
+            Some(Lost),
+            Some(Reacquired),
+            Some(Tracking),
+            None, // camera_lost: no guidance, no change
+            Some(Tracking),
+            Some(Coasting),
+            Some(Tracking),
+            Some(Coasting),
+            Some(Lost),
+        ] {
+            c.observe(&estimate(t));
+        }
+        assert_eq!(
+            c.changes(),
+            [(Tracking, 2), (Coasting, 2), (Lost, 1), (Reacquired, 1)]
+        );
+    }
 
     #[test]
     fn special_values_are_spelled_as_prometheus_reads_them() {

@@ -4,7 +4,8 @@
 //! frame order) and with the [`StatusSummary`] once per status interval, and the publishers
 //! omnirow ships: UDP JSON datagrams to unicast or multicast destinations ([`udp`]), JSON lines
 //! on stdout ([`stdout`]), and the HTTP service ([`http`]: /healthz, /metrics from
-//! [`metrics`], /status, /history.json and the live view from [`live`], /overlay.png), which
+//! [`metrics`], /status, /history.json and the live view from [`live`], /overlay.png from
+//! [`overlay`]), which
 //! reads the node's [`crate::status`] instead of being called. A ROS 2 publisher plugs in as
 //! one more [`Publisher`]. Also the `[publish]` section of the
 //! configuration (`[http]` is [`http`]'s).
@@ -12,6 +13,7 @@
 pub mod http;
 pub mod live;
 pub mod metrics;
+pub mod overlay;
 pub mod stdout;
 pub mod udp;
 

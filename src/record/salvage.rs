@@ -11,8 +11,9 @@
 //! held. Only a file without its footer and end magic is "cut short". A chunk identical to one
 //! of the last few read (a block written twice) is skipped as a duplicate.
 //!
-//! Compressed chunks (zstd, lz4) are refused with [`SalvageError::Compressed`]: omnirow is
-//! built without those decoders.
+//! Compressed chunks (zstd and lz4, as ros2 bag and Foxglove write them) are decompressed into
+//! a buffer of their own; one that does not decompress to its stated size and CRC is damage
+//! like any other.
 
 use mcap::records::{op, Record};
 use std::collections::BTreeMap;
@@ -30,6 +31,8 @@ const MAX_COMPRESSION_NAME: u64 = 16;
 const MAX_SMALL_RECORD: u64 = 64 << 20;
 /// Largest attachment or metadata record.
 const MAX_ATTACHMENT: u64 = 1 << 30;
+/// Largest uncompressed size a compressed chunk may claim (a damaged size is not allocated).
+const MAX_UNCOMPRESSED_CHUNK: u64 = 1 << 30;
 /// Scan window when looking for the next chunk.
 const SCAN_WINDOW: usize = 1 << 20;
 /// How far a file without either magic is searched for a chunk before it is called no MCAP.
@@ -44,8 +47,6 @@ pub enum SalvageError {
     Io(#[from] std::io::Error),
     #[error("not an MCAP file (no MCAP magic at its start or end, and no chunk)")]
     NotMcap,
-    #[error("the chunk at byte {offset} is compressed with {compression}, which omnirow does not read (convert it with `mcap convert --compression none`)")]
-    Compressed { offset: u64, compression: String },
 }
 
 /// Messages per channel id.
@@ -153,10 +154,12 @@ enum State {
     Definitions(usize),
     /// Reading the top-level record at `pos`.
     TopLevel,
-    /// Yielding the records of the chunk in `rec[at..end]`.
+    /// Yielding the records of the chunk in `rec[at..end]`, or in `unpacked[at..end]` when
+    /// the chunk was compressed.
     InChunk {
         at: usize,
         end: usize,
+        unpacked: bool,
     },
     Done,
 }
@@ -177,6 +180,8 @@ pub struct Salvage<R: Read + Seek> {
     definitions: Vec<Definition>,
     /// Body of the current top-level record.
     rec: Vec<u8>,
+    /// The records of the current chunk when it was compressed.
+    unpacked: Vec<u8>,
     scan: Vec<u8>,
     state: State,
     /// End of the last intact chunk: a scan for the next chunk starts here.
@@ -208,6 +213,7 @@ impl<R: Read + Seek> Salvage<R> {
             index: Vec::new(),
             definitions: Vec::new(),
             rec: Vec::new(),
+            unpacked: Vec::new(),
             scan: Vec::new(),
             state: State::TopLevel,
             trusted: 8,
@@ -303,16 +309,21 @@ impl<R: Read + Seek> Salvage<R> {
                     };
                     return Ok(Some(Event::Record(record)));
                 }
-                State::InChunk { at, end } => {
+                State::InChunk { at, end, unpacked } => {
                     if at >= end {
                         self.state = State::TopLevel;
                         return Ok(Some(Event::ChunkEnd));
                     }
-                    let Some((opcode, body_at, next)) = frame(&self.rec[..end], at) else {
+                    let records = if unpacked { &self.unpacked } else { &self.rec };
+                    let Some((opcode, body_at, next)) = frame(&records[..end], at) else {
                         unreachable!("chunk records were checked when the chunk was read")
                     };
-                    self.state = State::InChunk { at: next, end };
-                    let body = &self.rec[body_at..next];
+                    self.state = State::InChunk {
+                        at: next,
+                        end,
+                        unpacked,
+                    };
+                    let body = &records[body_at..next];
                     let record = mcap::parse_record(opcode, body)
                         .expect("chunk records were parsed when the chunk was read");
                     return Ok(Some(Event::Record(record)));
@@ -361,7 +372,11 @@ impl<R: Read + Seek> Salvage<R> {
         }
         if opcode == op::CHUNK {
             match self.read_chunk(at, len)? {
-                Ok((records_at, end)) => {
+                Ok(ChunkRecords {
+                    at: records_at,
+                    end,
+                    unpacked,
+                }) => {
                     if self.is_duplicate() {
                         self.report.duplicate_chunks += 1;
                         tracing::warn!(
@@ -380,6 +395,7 @@ impl<R: Read + Seek> Salvage<R> {
                     self.state = State::InChunk {
                         at: records_at,
                         end,
+                        unpacked,
                     };
                 }
                 Err(why) => self.damaged(at, why)?,
@@ -449,13 +465,13 @@ impl<R: Read + Seek> Salvage<R> {
         }
     }
 
-    /// Reads and checks the chunk record at `at` (body length `len`) into `rec`: the range of
-    /// its records, or why it is damaged.
+    /// Reads and checks the chunk record at `at` (body length `len`) into `rec` (its records
+    /// into `unpacked` when compressed): where its records are, or why it is damaged.
     fn read_chunk(
         &mut self,
         at: u64,
         len: u64,
-    ) -> Result<Result<(usize, usize), String>, SalvageError> {
+    ) -> Result<Result<ChunkRecords, String>, SalvageError> {
         let room = self.data_end.saturating_sub(at + FRAMING);
         if len > room {
             return Ok(Err(format!(
@@ -471,7 +487,7 @@ impl<R: Read + Seek> Salvage<R> {
         self.rec.clear();
         self.rec.push(op::CHUNK);
         self.read_body(at + FRAMING, len)?;
-        check_chunk(at, &self.rec)
+        Ok(check_chunk(at, &self.rec, &mut self.unpacked))
     }
 
     /// Reads `len` bytes at `at` onto the end of `rec` (they are in the file: checked).
@@ -886,67 +902,130 @@ fn chunk_lengths_agree(len: u64, head: &[u8]) -> Result<(), String> {
     Ok(())
 }
 
-/// Checks a chunk record (`rec`: opcode, then body): parses, CRC, every record inside parses
-/// and the time range matches the messages. The range of its records in `rec`.
-fn check_chunk(at: u64, rec: &[u8]) -> Result<Result<(usize, usize), String>, SalvageError> {
+/// Where a checked chunk's records are: `rec[at..end]`, or `unpacked[at..end]` when the chunk
+/// was compressed.
+struct ChunkRecords {
+    at: usize,
+    end: usize,
+    unpacked: bool,
+}
+
+/// Checks a chunk record (`rec`: opcode, then body): parses, decompresses (into `unpacked`),
+/// CRC, every record inside parses and the time range matches the messages.
+fn check_chunk(at: u64, rec: &[u8], unpacked: &mut Vec<u8>) -> Result<ChunkRecords, String> {
     let body = &rec[1..];
     let (header, data) = match mcap::parse_record(op::CHUNK, body) {
         Ok(Record::Chunk { header, data }) => (header, data),
         Ok(_) => unreachable!("parsed as a chunk"),
-        Err(e) => return Ok(Err(format!("a chunk that does not parse: {e}"))),
+        Err(e) => return Err(format!("a chunk that does not parse: {e}")),
     };
-    if !header.compression.is_empty() {
-        return Err(SalvageError::Compressed {
-            offset: at,
-            compression: header.compression,
-        });
-    }
-    let records_at = 1 + body.len() - data.len();
+    let compressed = !header.compression.is_empty();
+    let (records, found) = if compressed {
+        decompress(
+            &header.compression,
+            &data,
+            header.uncompressed_size,
+            unpacked,
+        )?;
+        let n = unpacked.len();
+        (
+            &unpacked[..],
+            ChunkRecords {
+                at: 0,
+                end: n,
+                unpacked: true,
+            },
+        )
+    } else {
+        let records_at = 1 + body.len() - data.len();
+        (
+            &rec[records_at..],
+            ChunkRecords {
+                at: records_at,
+                end: rec.len(),
+                unpacked: false,
+            },
+        )
+    };
     if header.uncompressed_crc != 0 {
-        let calculated = crc32fast::hash(&data);
+        let calculated = crc32fast::hash(records);
         if calculated != header.uncompressed_crc {
-            return Ok(Err(format!(
+            return Err(format!(
                 "a chunk whose CRC does not match (saved {:#010x}, calculated {calculated:#010x})",
                 header.uncompressed_crc
-            )));
+            ));
         }
     }
+    // Positions in messages: file offsets for stored records, offsets into the decompressed
+    // records for compressed ones.
+    let place = |i: usize| {
+        if compressed {
+            format!("byte {i} of its decompressed records")
+        } else {
+            format!("byte {}", at + (found.at + i) as u64 - 1)
+        }
+    };
     let mut bounds: Option<(u64, u64)> = None;
-    let mut i = records_at;
-    while i < rec.len() {
-        let Some((opcode, body_at, next)) = frame(rec, i) else {
-            return Ok(Err(format!(
-                "a chunk whose record at byte {} runs past its end",
-                at + i as u64 - 1
-            )));
+    let mut i = 0;
+    while i < records.len() {
+        let Some((opcode, body_at, next)) = frame(records, i) else {
+            return Err(format!(
+                "a chunk whose record at {} runs past its end",
+                place(i)
+            ));
         };
         if !matches!(opcode, op::SCHEMA | op::CHANNEL | op::MESSAGE) {
-            return Ok(Err(format!(
-                "a chunk holding a record of opcode {opcode:#04x}"
-            )));
+            return Err(format!("a chunk holding a record of opcode {opcode:#04x}"));
         }
-        match mcap::parse_record(opcode, &rec[body_at..next]) {
+        match mcap::parse_record(opcode, &records[body_at..next]) {
             Ok(Record::Message { header, .. }) => {
                 let t = header.log_time;
                 bounds = Some(bounds.map_or((t, t), |(a, b)| (a.min(t), b.max(t))));
             }
             Ok(_) => {}
-            Err(e) => {
-                return Ok(Err(format!(
-                    "a chunk holding a record that does not parse: {e}"
-                )))
-            }
+            Err(e) => return Err(format!("a chunk holding a record that does not parse: {e}")),
         }
         i = next;
     }
     if let Some((first, last)) = bounds {
         if (first, last) != (header.message_start_time, header.message_end_time) {
-            return Ok(Err(
-                "a chunk whose time range does not match its messages".into()
-            ));
+            return Err("a chunk whose time range does not match its messages".into());
         }
     }
-    Ok(Ok((records_at, rec.len())))
+    Ok(found)
+}
+
+/// Decompresses a chunk's records (`zstd` or `lz4` frames) into `out`, which must come to
+/// exactly `size` bytes.
+fn decompress(compression: &str, data: &[u8], size: u64, out: &mut Vec<u8>) -> Result<(), String> {
+    if size > MAX_UNCOMPRESSED_CHUNK {
+        return Err(format!(
+            "a {compression} chunk that claims {size} bytes uncompressed"
+        ));
+    }
+    out.clear();
+    out.reserve(size as usize);
+    // One byte more than stated tells a chunk that decompresses to more.
+    let read = match compression {
+        "zstd" => ruzstd::decoding::StreamingDecoder::new(data)
+            .map_err(|e| e.to_string())
+            .and_then(|d| d.take(size + 1).read_to_end(out).map_err(|e| e.to_string())),
+        "lz4" => lz4_flex::frame::FrameDecoder::new(data)
+            .take(size + 1)
+            .read_to_end(out)
+            .map_err(|e| e.to_string()),
+        other => return Err(format!("a chunk with an unknown compression `{other}`")),
+    };
+    match read {
+        Ok(n) if n as u64 == size => Ok(()),
+        Ok(n) => Err(format!(
+            "a {compression} chunk that decompresses to {}{n} bytes, not the {size} it states",
+            if n as u64 > size { "more than " } else { "" }
+        )),
+        Err(e) => Err(format!(
+            "a {compression} chunk that does not decompress: {e}"
+        )),
+    }
 }
 
 #[cfg(test)]

@@ -36,6 +36,10 @@ pub struct SyntheticDriveOptions {
     /// When positive: at this time, seconds, the robot crosses to the next inter-row path on
     /// its left (one spacing, over [`CROSSING_S`]), its yaw following its sideways motion.
     pub cross_at_s: f64,
+    /// Curvature of the rows, 1/m, positive bending left (0: straight): the robot drives
+    /// along concentric rows (its yaw and offset relative to their tangents), see
+    /// [`SynthOptions::curvature_per_m`].
+    pub curvature_per_m: f64,
     /// Render threads (0: as many as the machine has).
     pub render_threads: usize,
 }
@@ -59,6 +63,7 @@ pub(crate) struct RawSynthetic {
     offset_amplitude_m: Raw<f64>,
     period_s: Raw<f64>,
     cross_at_s: Raw<f64>,
+    curvature_per_m: Raw<f64>,
 }
 
 impl RawSynthetic {
@@ -119,6 +124,13 @@ impl RawSynthetic {
                 0.0,
                 1e6,
             ),
+            curvature_per_m: c.range(
+                "source.synthetic.curvature_per_m",
+                &self.curvature_per_m,
+                0.0,
+                -0.2,
+                0.2,
+            ),
             render_threads: 0,
         }
     }
@@ -174,6 +186,7 @@ impl SyntheticDrive {
             },
             plant_distance_m: 0.05,
             samples: 2,
+            curvature_per_m: opts.curvature_per_m,
             ..SynthOptions::default()
         };
         base.validate()?;
@@ -279,6 +292,7 @@ mod tests {
             offset_amplitude_m: 0.1,
             period_s: 0.01,
             cross_at_s: 0.0,
+            curvature_per_m: 0.0,
             render_threads: 1,
         }
     }

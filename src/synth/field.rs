@@ -5,7 +5,9 @@
 //! each plant's position error along and across its row (Gaussian, truncated at ±3σ so that a
 //! lookup only needs a bounded window), and weeds (the same plant at uniformly random positions
 //! around the camera, in a bucket grid). [`Field::plant_at`] answers "which plant covers this
-//! ground point" in constant time.
+//! ground point" in constant time. A curved field ([`SynthOptions::curvature_per_m`]) is the
+//! same lattice bent into concentric circles ([`Bend`]): a world point is mapped to its arc
+//! length and lateral position before the lookup.
 
 use super::options::SynthOptions;
 use super::rng::Rng;
@@ -181,6 +183,86 @@ impl WeedGrid {
     }
 }
 
+/// The bend of a curved field: world (x, y) ↔ field (u, v), where `u` is the arc length along
+/// row 0 and `v` the position across the rows (the straight field's coordinates). The rows are
+/// circles about the centre (x0, r), r = 1/curvature (signed: positive to the left); at
+/// x = x0 they run along +X, so there the field and the world agree to first order.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Bend {
+    x0: f64,
+    r: f64,
+    abs_r: f64,
+    sign: f64,
+}
+
+impl Bend {
+    /// The bend of curvature `curvature_per_m` (not 0) whose rows run along +X at `x0`.
+    pub fn new(curvature_per_m: f64, x0: f64) -> Self {
+        let r = 1.0 / curvature_per_m;
+        Bend {
+            x0,
+            r,
+            abs_r: r.abs(),
+            sign: r.signum(),
+        }
+    }
+
+    /// Field coordinates (arc length along row 0, across the rows) of world point (x, y).
+    #[inline]
+    pub fn to_field(self, x: f64, y: f64) -> (f64, f64) {
+        let dx = x - self.x0;
+        let dy = self.sign * (self.r - y);
+        (
+            self.x0 + self.abs_r * dx.atan2(dy),
+            self.r - self.sign * dx.hypot(dy),
+        )
+    }
+
+    /// World point of field coordinates (u, v).
+    #[inline]
+    pub fn to_world(self, u: f64, v: f64) -> (f64, f64) {
+        let (s, c) = ((u - self.x0) / self.abs_r).sin_cos();
+        let rho = self.sign * (self.r - v);
+        (self.x0 + rho * s, self.r - self.sign * rho * c)
+    }
+
+    /// Distance of world point (x, y) from the centre.
+    #[inline]
+    fn radius(&self, x: f64, y: f64) -> f64 {
+        (x - self.x0).hypot(self.r - y)
+    }
+
+    /// A box in field coordinates (u0, u1, v0, v1) holding the image of the world rectangle
+    /// [x0, x1] × [y0, y1]; `None` when the rectangle holds the centre or reaches across the
+    /// seam behind it (where the arc length jumps).
+    fn field_box(&self, x0: f64, x1: f64, y0: f64, y1: f64) -> Option<(f64, f64, f64, f64)> {
+        let beyond = if self.sign > 0.0 {
+            y1 >= self.r
+        } else {
+            y0 <= self.r
+        };
+        if beyond && x0 <= self.x0 && x1 >= self.x0 {
+            return None;
+        }
+        // a convex set clear of the centre and the seam: its angles are extreme at corners,
+        // its largest radius at a corner, its smallest at the point nearest the centre
+        let (mut u0, mut u1, mut rmax) = (f64::INFINITY, f64::NEG_INFINITY, 0.0f64);
+        for (x, y) in [(x0, y0), (x0, y1), (x1, y0), (x1, y1)] {
+            let u = self.to_field(x, y).0;
+            u0 = u0.min(u);
+            u1 = u1.max(u);
+            rmax = rmax.max(self.radius(x, y));
+        }
+        let rmin = self.radius(self.x0.clamp(x0, x1), self.r.clamp(y0, y1));
+        let (v0, v1) = if self.sign > 0.0 {
+            (self.r - rmax, self.r - rmin)
+        } else {
+            (self.r + rmin, self.r + rmax)
+        };
+        Some((u0, u1, v0, v1))
+    }
+}
+
 /// The crop field: rows, plants with their position errors, and weeds.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Field {
@@ -204,6 +286,8 @@ pub struct Field {
     weeds: WeedGrid,
     /// Weed stems (x, y), metres.
     weed_list: Vec<[f64; 2]>,
+    /// The bend of a curved field (`None`: straight rows).
+    bend: Option<Bend>,
 }
 
 /// Which plant, if any, covers a ground point.
@@ -223,8 +307,15 @@ impl Field {
         let shape = PlantShape::new(opts.leaf_length_m, opts.leaf_width_m);
         let s = opts.row_spacing_m;
         let pd = opts.plant_distance_m;
-        let row_min = (-opts.field_half_width_m / s).ceil() as i64;
-        let row_max = (opts.field_half_width_m / s).floor() as i64;
+        let bend =
+            (opts.curvature_per_m != 0.0).then(|| Bend::new(opts.curvature_per_m, opts.along_m));
+        // a curved field keeps its rows clear of the centre
+        let half_width = match bend {
+            Some(b) => opts.field_half_width_m.min(0.8 * b.abs_r),
+            None => opts.field_half_width_m,
+        };
+        let row_min = (-half_width / s).ceil() as i64;
+        let row_max = (half_width / s).floor() as i64;
         let k_min = (-opts.field_half_length_m / pd).ceil() as i64;
         let k_max = (opts.field_half_length_m / pd).floor() as i64;
         let noisy = opts.along_sd_m > 0.0 || opts.across_sd_m > 0.0;
@@ -275,6 +366,7 @@ impl Field {
             window_y: reach + max_y + 1e-9,
             weeds: WeedGrid::new(&weeds, camera_xy, half, reach),
             weed_list: weeds,
+            bend,
         }
     }
 
@@ -305,13 +397,43 @@ impl Field {
         &self.weed_list
     }
 
+    /// The bend of a curved field (`None`: straight rows).
+    pub fn bend(&self) -> Option<&Bend> {
+        self.bend.as_ref()
+    }
+
     /// Ground position (x, y) of plant k of row i, position error included.
     pub fn plant_position(&self, row: i64, k: i64) -> [f64; 2] {
+        let [u, v] = self.stem_field(row, k);
+        match &self.bend {
+            Some(b) => b.to_world(u, v).into(),
+            None => [u, v],
+        }
+    }
+
+    /// Field position (u, v) of plant k of row i (the straight field's).
+    #[inline]
+    fn stem_field(&self, row: i64, k: i64) -> [f64; 2] {
         let (ox, oy) = self.offset(row, k);
         [
             k as f64 * self.plant_distance + ox,
             row as f64 * self.row_spacing + oy,
         ]
+    }
+
+    /// The query (x, y, reach) in field coordinates: the reach widened where the bend
+    /// stretches arc length (nearer the centre than row 0).
+    #[inline]
+    fn field_query(&self, x: f64, y: f64, reach: f64) -> (f64, f64, f64) {
+        match &self.bend {
+            None => (x, y, reach),
+            Some(b) => {
+                let (u, v) = b.to_field(x, y);
+                let rho = b.radius(x, y);
+                let stretch = b.abs_r / (rho - reach).max(1e-3 * b.abs_r);
+                (u, v, reach * stretch.max(1.0))
+            }
+        }
     }
 
     #[inline]
@@ -327,6 +449,7 @@ impl Field {
     /// Whether any plant's stem may lie within `reach` metres of (x, y) along each axis
     /// (the window [`plants_near`](Self::plants_near) would visit is not empty).
     pub fn any_plant_near(&self, x: f64, y: f64, reach: f64) -> bool {
+        let (x, y, reach) = self.field_query(x, y, reach);
         let (lo, hi) = self.window(x, y, reach);
         lo[0] <= hi[0] && lo[1] <= hi[1]
     }
@@ -352,6 +475,7 @@ impl Field {
     /// Calls `f(row, k, stem)` for every plant whose stem (position error included) may lie
     /// within `reach` metres of (x, y) along each axis: another renderer's leaf reach.
     pub fn plants_near(&self, x: f64, y: f64, reach: f64, mut f: impl FnMut(i64, i64, [f64; 2])) {
+        let (x, y, reach) = self.field_query(x, y, reach);
         let (lo, hi) = self.window(x, y, reach);
         for i in lo[0]..=hi[0] {
             for k in lo[1]..=hi[1] {
@@ -364,6 +488,19 @@ impl Field {
     /// (Conservative: may say false for a bare rectangle, never true for a covered one.)
     #[inline]
     pub fn is_bare(&self, x0: f64, x1: f64, y0: f64, y1: f64) -> bool {
+        let rows_bare = match &self.bend {
+            None => self.rows_bare(x0, x1, y0, y1),
+            Some(b) => match b.field_box(x0, x1, y0, y1) {
+                Some((u0, u1, v0, v1)) => self.rows_bare(u0, u1, v0, v1),
+                None => false,
+            },
+        };
+        rows_bare && self.weeds.is_bare(x0, x1, y0, y1)
+    }
+
+    /// True when no plant reaches into the field rectangle [u0, u1] × [v0, v1].
+    #[inline]
+    fn rows_bare(&self, x0: f64, x1: f64, y0: f64, y1: f64) -> bool {
         let i_lo = ceil_i((y0 - self.window_y) * self.inv_spacing).max(self.row_min);
         let i_hi = floor_i((y1 + self.window_y) * self.inv_spacing).min(self.row_max);
         if i_lo <= i_hi {
@@ -373,12 +510,30 @@ impl Field {
                 return false;
             }
         }
-        self.weeds.is_bare(x0, x1, y0, y1)
+        true
     }
 
     /// What covers ground point (x, y).
     #[inline]
     pub fn cover_at(&self, x: f64, y: f64) -> Cover {
+        let (u, v) = match &self.bend {
+            Some(b) => b.to_field(x, y),
+            None => (x, y),
+        };
+        if let Some(c) = self.plant_cover(u, v) {
+            return c;
+        }
+        for w in self.weeds.candidates(x, y) {
+            if let Some(edge) = self.shape.leaf_at(x - w[0], y - w[1]) {
+                return Cover::Plant { edge };
+            }
+        }
+        Cover::Soil
+    }
+
+    /// The plant covering field point (x, y), if any.
+    #[inline]
+    fn plant_cover(&self, x: f64, y: f64) -> Option<Cover> {
         let s = self.row_spacing;
         let pd = self.plant_distance;
         let i_lo = ceil_i((y - self.window_y) * self.inv_spacing).max(self.row_min);
@@ -392,17 +547,12 @@ impl Field {
                     let (ox, oy) = self.offset(i, k);
                     if let Some(edge) = self.shape.leaf_at(x - (k as f64 * pd + ox), y - (yi + oy))
                     {
-                        return Cover::Plant { edge };
+                        return Some(Cover::Plant { edge });
                     }
                 }
             }
         }
-        for w in self.weeds.candidates(x, y) {
-            if let Some(edge) = self.shape.leaf_at(x - w[0], y - w[1]) {
-                return Cover::Plant { edge };
-            }
-        }
-        Cover::Soil
+        None
     }
 }
 
@@ -410,6 +560,62 @@ impl Field {
 mod tests {
     use super::*;
     use proptest::prelude::*;
+
+    proptest! {
+        /// The bend maps field and world coordinates onto each other, keeps row 0's
+        /// tangent along +X at x0 and puts row i on a circle of radius r − i·s about the
+        /// centre; the box of a world rectangle holds the field images of its points.
+        #[test]
+        fn bend_round_trips_and_boxes_hold_their_points(
+            k in prop_oneof![-0.2f64..-0.005, 0.005f64..0.2], x0 in -50.0f64..50.0,
+            u in -20.0f64..20.0, v in -2.0f64..2.0, w in 0.01f64..1.0,
+        ) {
+            // arcs shorter than half a turn
+            prop_assume!(u.abs() < 3.0 / k.abs());
+            let b = Bend::new(k, x0);
+            let (x, y) = b.to_world(x0 + u, v);
+            let (u2, v2) = b.to_field(x, y);
+            prop_assert!((u2 - x0 - u).abs() < 1e-9 && (v2 - v).abs() < 1e-9);
+            prop_assert!(((x - x0).hypot(1.0 / k - y) - (1.0 / k - v).abs()).abs() < 1e-9);
+            let (xa, ya) = b.to_world(x0 + 1e-4, 0.0);
+            prop_assert!((ya / (xa - x0)).abs() < 1e-3);
+            if let Some((u0, u1, v0, v1)) = b.field_box(x, x + w, y, y + w) {
+                for (fx, fy) in [(0.5, 0.5), (0.0, 1.0), (0.3, 0.0), (1.0, 0.7)] {
+                    let (pu, pv) = b.to_field(x + fx * w, y + fy * w);
+                    prop_assert!(pu >= u0 - 1e-9 && pu <= u1 + 1e-9 && pv >= v0 - 1e-9 && pv <= v1 + 1e-9);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn curved_field_puts_the_stems_on_circles_and_finds_them() {
+        let opts = SynthOptions {
+            curvature_per_m: 0.05,
+            along_m: 3.0,
+            field_half_length_m: 20.0,
+            field_half_width_m: 30.0,
+            ..Default::default()
+        };
+        let f = Field::new(&opts, 1, [3.0, 0.0]);
+        // rows kept clear of the centre 20 m to the left: |y| <= 16 m
+        assert_eq!(f.rows(), -32..=32);
+        for (i, k) in [(0, 20), (3, -40), (-5, 100)] {
+            let p = f.plant_position(i, k);
+            let r = (p[0] - 3.0).hypot(20.0 - p[1]);
+            assert!((r - (20.0 - i as f64 * 0.5)).abs() < 1e-9, "{r}");
+            assert!(matches!(f.cover_at(p[0], p[1]), Cover::Plant { .. }));
+            assert!(!f.is_bare(p[0] - 0.01, p[0] + 0.01, p[1] - 0.01, p[1] + 0.01));
+        }
+        // 4 m ahead row 0 has bent 0.4 m to the left (row −1 to y ≈ −0.11): its straight
+        // line is soil there
+        let p = f.plant_position(0, 47);
+        assert!(
+            (p[0] - 7.0).abs() < 0.1 && (p[1] - 0.4).abs() < 0.02,
+            "{p:?}"
+        );
+        assert!(matches!(f.cover_at(7.0, 0.0), Cover::Soil));
+    }
 
     proptest! {
         #![proptest_config(ProptestConfig::with_cases(64))]

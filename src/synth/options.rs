@@ -66,6 +66,15 @@ pub struct SynthOptions {
     pub field_half_length_m: f64,
     /// The field holds the rows with |y| ≤ this, metres.
     pub field_half_width_m: f64,
+    /// Curvature of the rows, 1/m (0: straight rows). Positive bends them to the left (REP
+    /// 103) as the robot drives forward: the rows are concentric circles about the centre
+    /// (`along_m`, 1/curvature), row 0 (y = 0) of radius 1/|curvature|, row i of curvature
+    /// `c / (1 − c·i·spacing)`. The field is laid out in the
+    /// robot's tangent frame: the rows run along +X at the camera's `along_m` (so `yaw_deg`,
+    /// `lateral_m` and the truth's row lines are relative to the rows' tangents there), and
+    /// `along_m` is arc length along row 0. Rows farther than 0.8/|curvature| across are left
+    /// out (they would wrap round the centre).
+    pub curvature_per_m: f64,
     /// Background noise: salt-and-pepper density (0..1) before the Gaussian smoothing.
     pub noise: f64,
     /// Standard deviation of the Gaussian smoothing that follows the salt and pepper, pixels.
@@ -104,6 +113,7 @@ impl Default for SynthOptions {
             leaf_width_m: 0.015,
             field_half_length_m: 150.0,
             field_half_width_m: 150.0,
+            curvature_per_m: 0.0,
             noise: 0.0,
             noise_blur_px: 1.0,
             along_sd_m: 0.0,
@@ -163,6 +173,13 @@ impl SynthOptions {
             if !(v.is_finite() && v > 0.0 && v <= 10_000.0) {
                 return bad(name, v, "must be a positive length up to 10 km");
             }
+        }
+        if !(self.curvature_per_m.is_finite() && self.curvature_per_m.abs() <= 0.2) {
+            return bad(
+                "curvature_per_m",
+                self.curvature_per_m,
+                "must be within ±0.2 per metre (radius 5 m or more)",
+            );
         }
         if self.plant_distance_m < 0.005 {
             return bad(

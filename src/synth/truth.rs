@@ -38,6 +38,7 @@ impl GroundTruth {
             camera_lateral_m: o.lateral_m,
             row_spacing_m: s,
             plant_distance_m: o.plant_distance_m,
+            curvature_per_m: o.curvature_per_m,
             noise: NoiseTruth {
                 background_density: o.noise,
                 along_row_sd_m: o.along_sd_m,

@@ -1,0 +1,353 @@
+//! Curvature of the rows, measured from their points on the ground.
+//!
+//! Owns [`CurvatureFit`] and the [`CurvatureMeasurement`] it gives. The detector reports rows
+//! as great circles (straight lines on the ground); a curved row leaves its points off that
+//! line by its sagitta. Each kept image point (the detector's vegetation points, unit rays in
+//! the camera frame) is projected on the ground ([`GroundFrame::ray_on_ground`]) in the frame
+//! of the rows' vanishing point, assigned to the nearest detected row's ground line, and the
+//! rows near the robot are fitted together as concentric arcs, to second order: a point at
+//! `a` along the rows lies across them at
+//!
+//! ```text
+//! y = y_i + α_i + β·a + κ_i·a²/2,    κ_i = κ / (1 − κ·y_i)
+//! ```
+//!
+//! with `y_i` the row's detected lateral position, `α_i` its own shift, `β` a common turn (the
+//! vanishing point is the rows' mean direction, not their tangent below the robot) and `κ` the
+//! curvature of the line through the camera's foot point (positive: bending to the left, REP
+//! 103; rows farther from the turn's centre bend less). Points are weighted by the ground area
+//! their pixel covers, so near and far plants count alike. The fit widens its reach in passes
+//! (1.5 m, 3 m, then `range_m` along the rows), each assigning the points by the previous
+//! pass's arcs, so a strong bend does not hand far points to the neighbouring row. Weighted
+//! sums per row are kept in a reused buffer: a fit allocates nothing once warmed up.
+
+use super::GroundFrame;
+use crate::camera::Mounting;
+use nalgebra::{Rotation3, Vector3};
+use serde::{Deserialize, Serialize};
+
+/// Settings of the curvature fit.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CurvatureOptions {
+    /// Farthest distance along the rows, ahead and behind, of the points used, metres.
+    pub range_m: f64,
+    /// Farthest distance across the rows of the rows used, metres.
+    pub across_m: f64,
+    /// Fewest points in the fit.
+    pub min_points: usize,
+    /// Floor of the measurement's standard deviation, 1/m.
+    pub min_sd_per_m: f64,
+}
+
+impl Default for CurvatureOptions {
+    fn default() -> Self {
+        CurvatureOptions {
+            range_m: 4.0,
+            across_m: 2.0,
+            min_points: 100,
+            min_sd_per_m: 0.001,
+        }
+    }
+}
+
+/// One frame's curvature measurement.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct CurvatureMeasurement {
+    /// Curvature of the row-parallel line through the camera's foot point, 1/m, positive
+    /// when it bends to the left. A line `y` metres to the left bends by `κ / (1 − κ·y)`.
+    pub curvature_per_m: f64,
+    /// Its standard deviation, 1/m.
+    pub sd_per_m: f64,
+    /// Points in the fit.
+    pub points: usize,
+}
+
+impl CurvatureMeasurement {
+    /// Curvature of the row-parallel line `lateral_m` to the left of the camera's foot point.
+    pub fn at_lateral(&self, lateral_m: f64) -> f64 {
+        let k = self.curvature_per_m;
+        k / (1.0 - k * lateral_m)
+    }
+}
+
+/// Detected lines closer than this across the rows are one row, metres (the detector may
+/// report both edges of a row; rows are at least 0.2 m apart, `min_spacing_m`).
+const MERGE_M: f64 = 0.12;
+
+/// Image points of one plant whose errors go together (the fit's variance is inflated by it).
+const CORRELATED_PIXELS: f64 = 20.0;
+
+/// Weighted sums of one row's points: w, w·a, w·a², w·a³, w·a⁴, w·r, w·a·r, w·a²·r, w·r², n.
+type Sums = [f64; 10];
+
+/// The curvature fit for one camera (one per detector worker: it keeps buffers).
+#[derive(Debug, Clone, PartialEq)]
+pub struct CurvatureFit {
+    opts: CurvatureOptions,
+    mounting: Mounting,
+    robot_from_camera: Rotation3<f64>,
+    /// Detected rows' lateral positions on the ground, ascending.
+    lines: Vec<f64>,
+    sums: Vec<Sums>,
+}
+
+/// One pass's arcs: common turn and curvature, each row's own shift.
+#[derive(Debug, Clone, Copy, Default)]
+struct Arcs {
+    beta: f64,
+    kappa: f64,
+}
+
+impl CurvatureFit {
+    pub fn new(mounting: Mounting, opts: CurvatureOptions) -> Self {
+        CurvatureFit {
+            opts,
+            mounting,
+            robot_from_camera: mounting.robot_from_camera(),
+            lines: Vec::with_capacity(64),
+            sums: Vec::with_capacity(64),
+        }
+    }
+
+    /// The curvature from the vanishing point `vp` and the rows' plane normals (camera frame)
+    /// and the image points `rays` (unit, camera frame) with their `weights`. `None` when too
+    /// few points fall near the rows or the fit is degenerate.
+    pub fn measure(
+        &mut self,
+        vp: &[f64; 3],
+        normals: impl IntoIterator<Item = [f64; 3]>,
+        rays: &[[f32; 3]],
+        weights: &[f32],
+    ) -> Option<CurvatureMeasurement> {
+        let frame = GroundFrame::with_rotation(
+            &Vector3::from(*vp),
+            &self.robot_from_camera,
+            &self.mounting,
+            0.0,
+        )?;
+        self.lines.clear();
+        for n in normals {
+            let n = self.robot_from_camera * Vector3::from(n);
+            if let Some(y) = frame.row_lateral_m(&n) {
+                if y.abs() <= self.opts.across_m {
+                    self.lines.push(y);
+                }
+            }
+        }
+        if self.lines.is_empty() {
+            return None;
+        }
+        self.lines.sort_by(f64::total_cmp);
+        // lines closer than MERGE_M are one row found twice (both its edges): their mean
+        let mut w = 0;
+        let mut r = 0;
+        while r < self.lines.len() {
+            let (mut sum, mut n) = (self.lines[r], 1.0);
+            while r + 1 < self.lines.len() && self.lines[r + 1] - self.lines[r] < MERGE_M {
+                r += 1;
+                sum += self.lines[r];
+                n += 1.0;
+            }
+            self.lines[w] = sum / n;
+            w += 1;
+            r += 1;
+        }
+        self.lines.truncate(w);
+        let gap = self
+            .lines
+            .windows(2)
+            .map(|w| w[1] - w[0])
+            .fold(f64::INFINITY, f64::min);
+        let gate = if gap.is_finite() { gap / 3.0 } else { 0.15 };
+        let mut arcs = Arcs::default();
+        let mut result = None;
+        for reach in [1.5, 3.0, self.opts.range_m] {
+            let reach = reach.min(self.opts.range_m);
+            self.accumulate(&frame, rays, weights, reach, gate, &arcs);
+            match self.solve(&arcs) {
+                Some((a, m)) => {
+                    arcs = a;
+                    result = Some(m);
+                }
+                None => break,
+            }
+        }
+        result.filter(|m| m.points >= self.opts.min_points)
+    }
+
+    /// Sums the points within `reach` along the rows that lie within `gate` across of a
+    /// row's arc as `arcs` predicts it.
+    fn accumulate(
+        &mut self,
+        frame: &GroundFrame,
+        rays: &[[f32; 3]],
+        weights: &[f32],
+        reach: f64,
+        gate: f64,
+        arcs: &Arcs,
+    ) {
+        self.sums.clear();
+        self.sums.resize(self.lines.len(), [0.0; 10]);
+        let h = frame.height_m;
+        for (ray, &w) in rays.iter().zip(weights) {
+            let ray = Vector3::new(ray[0] as f64, ray[1] as f64, ray[2] as f64);
+            let ray = self.robot_from_camera * ray;
+            let Some([a, l]) = frame.ray_on_ground(&ray) else {
+                continue;
+            };
+            if a.abs() > reach {
+                continue;
+            }
+            // the row whose predicted arc passes nearest
+            let shift = arcs.beta * a;
+            let (mut best, mut best_d) = (usize::MAX, gate);
+            for (i, &y) in self.lines.iter().enumerate() {
+                let k = arcs.kappa / (1.0 - arcs.kappa * y);
+                let d = (l - (y + shift + k * a * a / 2.0)).abs();
+                if d < best_d {
+                    best = i;
+                    best_d = d;
+                }
+            }
+            if best == usize::MAX {
+                continue;
+            }
+            // the ground area of the pixel: solid angle × distance³ / height
+            let dist2 = a * a + l * l + h * h;
+            let w = w as f64 * dist2 * dist2.sqrt() / h;
+            let r = l - self.lines[best];
+            let s = &mut self.sums[best];
+            let a2 = a * a;
+            s[0] += w;
+            s[1] += w * a;
+            s[2] += w * a2;
+            s[3] += w * a2 * a;
+            s[4] += w * a2 * a2;
+            s[5] += w * r;
+            s[6] += w * a * r;
+            s[7] += w * a2 * r;
+            s[8] += w * r * r;
+            s[9] += 1.0;
+        }
+    }
+
+    /// Solves for the common turn and curvature (two fixed-point rounds for the rows' own
+    /// curvatures `κ_i`), starting from `prev`'s curvature.
+    fn solve(&self, prev: &Arcs) -> Option<(Arcs, CurvatureMeasurement)> {
+        let mut kappa = prev.kappa;
+        let mut out = None;
+        for _ in 0..3 {
+            let (mut saa, mut saq, mut sqq, mut sar, mut sqr, mut srr) =
+                (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+            let (mut n, mut rows) = (0.0, 0.0);
+            for (s, &y) in self.sums.iter().zip(&self.lines) {
+                if s[9] < 3.0 || s[0] <= 0.0 {
+                    continue;
+                }
+                // q = g·a²/2: the curvature's regressor for this row
+                let g = 1.0 / (1.0 - kappa * y);
+                let w = s[0];
+                saa += s[2] - s[1] * s[1] / w;
+                saq += g / 2.0 * (s[3] - s[1] * s[2] / w);
+                sqq += g * g / 4.0 * (s[4] - s[2] * s[2] / w);
+                sar += s[6] - s[1] * s[5] / w;
+                sqr += g / 2.0 * (s[7] - s[2] * s[5] / w);
+                srr += s[8] - s[5] * s[5] / w;
+                n += s[9];
+                rows += 1.0;
+            }
+            let det = saa * sqq - saq * saq;
+            if rows < 1.0 || n < rows + 3.0 || det.is_nan() || det <= 1e-12 * saa * sqq {
+                return None;
+            }
+            let beta = (sqq * sar - saq * sqr) / det;
+            let k = (saa * sqr - saq * sar) / det;
+            if !k.is_finite() || k.abs() > 1.0 {
+                return None;
+            }
+            // weighted least squares: cov = σ²·M⁻¹, σ² from the residuals; the pixels of one
+            // plant are not independent errors, so the variance is inflated by the pixels a
+            // plant spans (about CORRELATED_PIXELS)
+            let ssr = (srr - beta * sar - k * sqr).max(0.0);
+            let var = ssr / (n - rows - 2.0) * saa / det * CORRELATED_PIXELS;
+            let sd = var.sqrt();
+            kappa = k;
+            out = Some((
+                Arcs { beta, kappa: k },
+                CurvatureMeasurement {
+                    curvature_per_m: k,
+                    sd_per_m: sd.max(self.opts.min_sd_per_m),
+                    points: n as usize,
+                },
+            ));
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::camera::ideal_fisheye;
+    use crate::detect::{Detection, Detector, DetectorOptions};
+    use crate::synth::{render, SynthOptions};
+
+    /// Renders a field of curvature `k`, runs the detector and the fit: the measurement.
+    fn measured(k: f64, lateral: f64, yaw_deg: f64) -> CurvatureMeasurement {
+        let cal = ideal_fisheye(512, 612).unwrap();
+        let opts = SynthOptions {
+            curvature_per_m: k,
+            lateral_m: lateral,
+            yaw_deg,
+            plant_distance_m: 0.05,
+            ..Default::default()
+        };
+        let (img, truth) = render(&cal, &opts, 3).unwrap();
+        let frame = img.into_frame(0, truth);
+        let mut det = Detector::new(&cal, DetectorOptions::default()).unwrap();
+        let mut out = Detection::default();
+        det.process(&frame.view().unwrap(), &mut out).unwrap();
+        let vp = out.vanishing_point.expect("a vanishing point").direction;
+        let mut fit = CurvatureFit::new(cal.mounting, CurvatureOptions::default());
+        let p = det.points();
+        fit.measure(
+            &vp.into(),
+            out.rows.iter().map(|r| r.normal.into()),
+            &p.rays,
+            &p.weights,
+        )
+        .expect("a curvature")
+    }
+
+    #[test]
+    fn curved_and_straight_fields_through_the_detector() {
+        // the truth at the camera's foot point: c / (1 − c·y_camera)
+        for (k, lat, yaw) in [(0.05, 0.25, 3.0), (-0.02, 0.1, -4.0)] {
+            let m = measured(k, lat, yaw);
+            let truth = k / (1.0 - k * lat);
+            let err = (m.curvature_per_m - truth) / truth;
+            assert!(err.abs() < 0.05, "{k}: {m:?} vs {truth}");
+            assert!(m.points > 1000 && m.sd_per_m < 0.01, "{m:?}");
+            // a line one spacing to the left bends by c / (1 − c·y)
+            let left = m.at_lateral(0.5);
+            let c = m.curvature_per_m;
+            assert!((left - c / (1.0 - c * 0.5)).abs() < 1e-12);
+        }
+        let m = measured(0.0, 0.25, 0.0);
+        assert!(m.curvature_per_m.abs() < 0.002, "{m:?}");
+    }
+
+    #[test]
+    fn too_few_points_or_no_rows_give_nothing() {
+        let mut fit = CurvatureFit::new(Mounting::default(), CurvatureOptions::default());
+        let rays = [[0.0f32, 0.0, 1.0]; 10];
+        let w = [1.0f32; 10];
+        // rows along the camera's x axis (the default mounting looks down)
+        let vp = [1.0, 0.0, 0.0];
+        assert!(fit.measure(&vp, [[0.0, 1.0, 0.0]], &rays, &w).is_none());
+        assert!(fit.measure(&vp, [], &rays, &w).is_none());
+        assert!(fit
+            .measure(&[0.0, 0.0, 0.0], [[0.0, 1.0, 0.0]], &rays, &w)
+            .is_none());
+    }
+}
