@@ -10,7 +10,7 @@
 
 use crate::detect::{Detection, Method};
 use crate::frame::Frame;
-use crate::guidance::{CurvatureMeasurement, Guidance, GuidanceEstimate};
+use crate::guidance::{Guidance, GuidanceEstimate, RowFitMeasurement};
 use serde::{Deserialize, Serialize};
 
 /// The version of the [`Estimate`] JSON schema. Bumped on any incompatible change.
@@ -75,6 +75,13 @@ pub struct TruthEstimate {
     /// at world y bends by `c / (1 − c·y)` ([`Self::path_curvature_per_m`]).
     #[serde(default)]
     pub curvature_per_m: f64,
+    /// Distance along the rows to where they end, metres (negative once past; `None`: no
+    /// end in the scene) (schema 2).
+    #[serde(default)]
+    pub end_of_rows_m: Option<f64>,
+    /// No plant within 3 m along the rows, ahead or behind (schema 2).
+    #[serde(default)]
+    pub no_crop: bool,
 }
 
 impl TruthEstimate {
@@ -131,10 +138,10 @@ pub struct Estimate {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub guidance: Option<GuidanceEstimate>,
     /// The rows' curvature measured from this frame's points by the detector worker
-    /// ([`crate::pipeline::Processor::ground_curvature`]), on its way to row guidance in the
+    /// ([`crate::pipeline::Processor::row_fit`]), on its way to row guidance in the
     /// publisher; not published itself (guidance's `frame.curvature_per_m` is).
     #[serde(skip)]
-    pub ground_curvature: Option<CurvatureMeasurement>,
+    pub row_fit: Option<RowFitMeasurement>,
 }
 
 impl Estimate {
@@ -195,9 +202,11 @@ impl Estimate {
                 camera_lateral_m: t.camera_lateral_m,
                 row_spacing_m: t.row_spacing_m,
                 curvature_per_m: t.curvature_per_m,
+                end_of_rows_m: t.end_of_rows_m,
+                no_crop: t.no_crop,
             }),
             guidance: None,
-            ground_curvature: None,
+            row_fit: None,
         }
     }
 
@@ -220,7 +229,7 @@ impl Estimate {
             error: None,
             truth: None,
             guidance: None,
-            ground_curvature: None,
+            row_fit: None,
         }
     }
 
@@ -236,7 +245,7 @@ impl Estimate {
             self.capture_ns,
             vp,
             self.rows.iter().map(|r| r.normal),
-            self.ground_curvature.as_ref(),
+            self.row_fit.as_ref(),
             &mut out,
         );
         self.guidance = Some(out);

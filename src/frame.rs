@@ -112,6 +112,10 @@ pub struct Frame {
     pub truth: Option<Arc<GroundTruth>>,
 }
 
+/// Along the rows, ahead and behind, within which a plant counts for
+/// [`GroundTruth::no_crop`], metres.
+pub const NO_CROP_RANGE_M: f64 = 3.0;
+
 /// Ground truth of one synthetic image (computed by [`GroundTruth::of_scene`] in
 /// [`crate::synth`]).
 ///
@@ -147,6 +151,14 @@ pub struct GroundTruth {
     /// the row normals are those of the rows' tangent lines at the camera.
     #[serde(default)]
     pub curvature_per_m: f64,
+    /// Distance along the rows from the camera to where they end (the last plant), metres;
+    /// negative once past it; `None` when the scene sets no end (`rows_end_m`).
+    #[serde(default)]
+    pub end_of_rows_m: Option<f64>,
+    /// No plant grows within [`NO_CROP_RANGE_M`] along the rows of the camera, ahead or
+    /// behind (an empty stretch, the headland): nothing in view should be called a row.
+    #[serde(default)]
+    pub no_crop: bool,
     /// Noise settings used to render the image.
     pub noise: NoiseTruth,
     /// Plane normal of every row visible in the image (sign free).

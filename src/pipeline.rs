@@ -47,11 +47,8 @@ pub trait Processor: Send {
     ) -> Result<(), Box<dyn std::error::Error + Send + Sync>>;
 
     /// The rows' curvature from the points of the image just processed into `det`, for row
-    /// guidance (a detector with a [`crate::guidance::CurvatureFit`]); `None` by default.
-    fn ground_curvature(
-        &mut self,
-        _det: &Detection,
-    ) -> Option<crate::guidance::CurvatureMeasurement> {
+    /// guidance (a detector with a [`crate::guidance::RowFit`]); `None` by default.
+    fn row_fit(&mut self, _det: &Detection) -> Option<crate::guidance::RowFitMeasurement> {
         None
     }
 }
@@ -618,7 +615,7 @@ fn detect(
     match result {
         Ok(()) => {
             let mut est = Estimate::from_detection(frame, det, ms, min_quality);
-            est.ground_curvature = proc.ground_curvature(det);
+            est.row_fit = proc.row_fit(det);
             est
         }
         Err(e) => {

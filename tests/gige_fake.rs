@@ -215,6 +215,9 @@ fn injected_synthetic_field_gives_the_true_heading_and_tilt() {
         period_s: 0.02,
         cross_at_s: 0.0,
         curvature_per_m: 0.0,
+        rows_end_m: 0.0,
+        gap_start_m: 0.0,
+        gap_length_m: 0.0,
         render_threads: 0,
     })
     .unwrap();

@@ -3,7 +3,7 @@
 //! configuration mistakes in `[guidance]` or `[mounting]` are named.
 
 use omnirow::estimate::Estimate;
-use omnirow::guidance::TrackState;
+use omnirow::guidance::{CropState, TrackState};
 use std::process::Stdio;
 use std::time::Duration;
 
@@ -229,4 +229,103 @@ fn crossing_to_the_next_path_is_followed_without_a_jump() {
     assert_eq!(est[179].truth.as_ref().unwrap().path(), 1);
     assert_eq!((first.row_index, end.row_index), (Some(0), Some(-1)));
     assert!(end.lateral_offset_m.unwrap() > 0.35);
+}
+
+/// Runs the synthetic drive (408×342, 10 fps, 1 m/s) with `keys` added to
+/// `[source.synthetic]`; the estimates.
+fn drive_with(name: &str, frames: u32, keys: &str) -> Vec<Estimate> {
+    let dir = tmpdir(name);
+    let cfg = dir.join("omnirow.toml");
+    std::fs::write(
+        &cfg,
+        format!("[source.synthetic]\nwidth = 408\nheight = 342\nfps = 10.0\nseed = 5\n{keys}\n[http]\nenabled = false\n"),
+    )
+    .unwrap();
+    let (sock, addr) = udp();
+    let mut child = bin()
+        .args([
+            "run",
+            "--frames",
+            &frames.to_string(),
+            "--no-print",
+            "--udp",
+        ])
+        .arg(&addr)
+        .arg("--config")
+        .arg(&cfg)
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let est = collect(&sock, &mut child, Duration::from_secs(120));
+    assert!(child.wait_with_output().unwrap().status.success());
+    assert_eq!(est.len(), frames as usize);
+    est
+}
+
+#[test]
+fn end_of_the_rows_is_reported_and_the_headland_is_no_crop() {
+    // the rows end 2.5 m ahead of the start; the robot drives 3.4 m past their end
+    let est = drive_with("headland", 60, "rows_end_m = 2.5\n");
+    let mut reported = 0;
+    for e in &est {
+        let g = e.guidance.as_ref().unwrap();
+        let t = e.truth.as_ref().unwrap();
+        let truth = t.end_of_rows_m.unwrap();
+        if let Some(end) = g.end_of_row_m {
+            // issue 14's target: within 0.5 m once within 5 m
+            assert!(
+                (end - truth).abs() < 0.5,
+                "frame {}: {end} vs {truth}",
+                e.seq
+            );
+            reported += 1;
+        } else if truth > 0.3 {
+            panic!("frame {}: the end {truth} m ahead not reported", e.seq);
+        }
+        if t.no_crop {
+            assert_ne!(g.crop, CropState::Rows, "frame {}", e.seq);
+        }
+        if g.crop == CropState::NoCrop {
+            assert!(g.rows.is_empty() && g.frame.is_none());
+        }
+    }
+    assert!(reported >= 30, "{reported}");
+    // 3 m past the end nothing is taken for a row
+    let last = est.last().unwrap().guidance.as_ref().unwrap();
+    assert_ne!(last.crop, CropState::Rows);
+}
+
+#[test]
+fn an_empty_stretch_claims_no_rows_and_the_rows_after_it_are_followed() {
+    // no plant from 1.5 m to 8.5 m along: the robot crosses the whole stretch
+    let est = drive_with("gap", 100, "gap_start_m = 1.5\ngap_length_m = 7.0\n");
+    let mut empty = 0;
+    for e in &est {
+        let g = e.guidance.as_ref().unwrap();
+        let t = e.truth.as_ref().unwrap();
+        assert!(t.end_of_rows_m.is_none());
+        if t.no_crop {
+            assert_ne!(g.crop, CropState::Rows, "frame {}", e.seq);
+            empty += 1;
+        }
+        // whatever is measured is the real rows (far ones inside the stretch, measured less
+        // well): the offset from the nearest path centre within a fifth of the spacing
+        if let Some(f) = &g.frame {
+            let err = f.lateral_offset_m - t.path_offset_m(0);
+            let wrapped = err - (err / 0.5).round() * 0.5;
+            assert!(wrapped.abs() < 0.1, "frame {}: {f:?} vs {t:?}", e.seq);
+        }
+        if g.tracking != TrackState::Lost && e.seq > 90 {
+            let off = g.lateral_offset_m.unwrap();
+            assert!(
+                (off - t.path_offset_m(t.path())).abs() < 0.03,
+                "frame {}: {off}",
+                e.seq
+            );
+        }
+    }
+    assert!(empty >= 10, "{empty}");
+    let end = est.last().unwrap().guidance.as_ref().unwrap();
+    assert_eq!(end.crop, CropState::Rows);
+    assert!(matches!(end.tracking, TrackState::Tracking));
 }

@@ -12,7 +12,7 @@ use crate::camera::{Calibration, IdealLens};
 use crate::config::Config;
 use crate::detect::{Detection, Detector};
 use crate::frame::ImageView;
-use crate::guidance::{CurvatureFit, CurvatureMeasurement, CurvatureOptions, Guidance};
+use crate::guidance::{Guidance, RowFit, RowFitMeasurement, RowFitOptions};
 use crate::notify::Notifier;
 use crate::pipeline::{Pipeline, Processor};
 use crate::publish::http::{HttpServer, OverlayFn};
@@ -186,7 +186,7 @@ fn camera_source(_: &crate::gige::GigeConfig) -> anyhow::Result<Box<dyn Source>>
 
 /// The detector as the pipeline's processing step, with the rows' curvature fit when row
 /// guidance runs.
-struct DetectorWorker(Detector, Option<CurvatureFit>);
+struct DetectorWorker(Detector, Option<RowFit>);
 
 impl Processor for DetectorWorker {
     fn process(
@@ -197,7 +197,7 @@ impl Processor for DetectorWorker {
         self.0.process(view, out).map_err(Into::into)
     }
 
-    fn ground_curvature(&mut self, det: &Detection) -> Option<CurvatureMeasurement> {
+    fn row_fit(&mut self, det: &Detection) -> Option<RowFitMeasurement> {
         let fit = self.1.as_mut()?;
         let vp = det.vanishing_point?.direction;
         let p = self.0.points();
@@ -276,7 +276,7 @@ pub fn run(args: RunArgs, record_to: Option<PathBuf>) -> anyhow::Result<ExitCode
     for _ in 0..cfg.workers {
         let fit = cfg
             .guidance
-            .map(|_| CurvatureFit::new(cal.mounting, CurvatureOptions::default()));
+            .map(|_| RowFit::new(cal.mounting, RowFitOptions::default()));
         processors.push(Box::new(DetectorWorker(
             Detector::new(&cal, opts.clone()).context("detector")?,
             fit,

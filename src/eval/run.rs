@@ -488,6 +488,8 @@ mod tests {
             row_spacing_m: 0.5,
             plant_distance_m: 0.1,
             curvature_per_m: 0.0,
+            end_of_rows_m: None,
+            no_crop: false,
             noise: Default::default(),
             row_normals: vec![[0.0, 1.0, 0.0], [0.0, s, s]],
             row_lateral_m: vec![0.0, 0.5],

@@ -12,14 +12,14 @@
 
 pub mod comb;
 pub mod config;
-pub mod curvature;
 pub mod ground;
+pub mod rowfit;
 pub mod tracker;
 
 pub use comb::{fit_comb, fit_comb_with_roll, Comb, CombOptions};
 pub use config::GuidanceConfig;
-pub use curvature::{CurvatureFit, CurvatureMeasurement, CurvatureOptions};
 pub use ground::GroundFrame;
+pub use rowfit::{RowFit, RowFitMeasurement, RowFitOptions};
 pub use tracker::{Measurement, TrackState, Tracked, Tracker, TrackerOptions};
 
 use crate::camera::Mounting;
@@ -191,6 +191,31 @@ impl Warning {
     ];
 }
 
+/// What crop a frame shows around the robot.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CropState {
+    /// Rows measured, with plants on them within 3 m along (ahead or behind).
+    Rows,
+    /// Rows measured farther away, but no plant on them within 3 m along, ahead or behind:
+    /// an empty stretch, or the headland once past the rows' end.
+    EmptyStretch,
+    /// No crop visible: nothing in this frame is taken for a row (bare ground, the
+    /// headland, a covered camera); `rows` is empty and `frame` null.
+    #[default]
+    NoCrop,
+}
+
+impl CropState {
+    pub fn name(self) -> &'static str {
+        match self {
+            CropState::Rows => "rows",
+            CropState::EmptyStretch => "empty_stretch",
+            CropState::NoCrop => "no_crop",
+        }
+    }
+}
+
 /// One detected row as a line on the ground, base_link coordinates.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct GroundRow {
@@ -242,8 +267,12 @@ pub struct GuidanceEstimate {
     /// The followed line's index relative to the line nearest the tool point (0: the robot is
     /// nearest the line it follows; −1: it follows the line to its right).
     pub row_index: Option<i64>,
-    /// Distance ahead to the end of the rows, metres (`None`: not seen ending).
+    /// Distance ahead along the rows from base_link's origin to where the rows end (the last
+    /// plant), metres, once within 5 m (`None`: not seen ending there).
     pub end_of_row_m: Option<f64>,
+    /// What crop the frame shows around the robot.
+    #[serde(default)]
+    pub crop: CropState,
     /// Filter covariance of (offset, heading, curvature, spacing), row-major.
     pub covariance: Option<[[f64; 4]; 4]>,
     /// This frame's own measurement, `None` when the frame gave none.
@@ -268,6 +297,7 @@ impl Default for GuidanceEstimate {
             roll_rad: None,
             row_index: None,
             end_of_row_m: None,
+            crop: CropState::NoCrop,
             covariance: None,
             frame: None,
             rejected: false,
@@ -338,6 +368,9 @@ pub struct Guidance {
     tracker: Tracker,
     consistency: Consistency,
     tilted: bool,
+    /// The spacing last tracked: the comb's first guess when none is configured (a few far
+    /// rows, as at an empty stretch's end, otherwise fit a comb of twice the spacing).
+    spacing_hint: Option<f64>,
 }
 
 impl Guidance {
@@ -357,6 +390,7 @@ impl Guidance {
             tracker: Tracker::new(opts.tracker),
             consistency: Consistency::default(),
             tilted: false,
+            spacing_hint: None,
         })
     }
 
@@ -366,14 +400,14 @@ impl Guidance {
 
     /// Folds in one frame, in capture order: its capture time, the rows' vanishing point and
     /// the rows' plane normals (camera frame; `vp` `None` when the frame has no usable
-    /// vanishing point), and the curvature the frame's points gave ([`CurvatureFit`], run
+    /// vanishing point), and the curvature the frame's points gave ([`RowFit`], run
     /// where the points are). Writes the published guidance into `out` (its buffers reused).
     pub fn update(
         &mut self,
         t_ns: u64,
         vp: Option<[f64; 3]>,
         normals: impl IntoIterator<Item = [f64; 3]>,
-        curvature: Option<&CurvatureMeasurement>,
+        curvature: Option<&RowFitMeasurement>,
         out: &mut GuidanceEstimate,
     ) {
         out.mode = self.opts.mode;
@@ -383,6 +417,11 @@ impl Guidance {
         out.roll_rad = None;
         out.end_of_row_m = None;
         let measured = vp.and_then(|vp| self.measure(&Vector3::from(vp), normals, curvature, out));
+        out.crop = match (&measured, curvature) {
+            (None, _) => CropState::NoCrop,
+            (Some(_), Some(f)) if !f.crop_near => CropState::EmptyStretch,
+            (Some(_), _) => CropState::Rows,
+        };
         let m = measured.map(|(m, _)| m);
         let r = self.tracker.update(t_ns, m.as_ref());
         out.tracking = r.state;
@@ -394,6 +433,9 @@ impl Guidance {
                 out.curvature_per_m = Some(x[2]);
                 out.row_spacing_m = Some(x[3]);
                 out.row_index = Some(-(x[0] / x[3]).round() as i64);
+                if r.state != TrackState::Coasting {
+                    self.spacing_hint = Some(x[3]);
+                }
                 out.covariance = Some(p.transpose().into());
             }
             _ => {
@@ -429,7 +471,7 @@ impl Guidance {
         &mut self,
         vp: &Vector3<f64>,
         normals: impl IntoIterator<Item = [f64; 3]>,
-        curvature: Option<&CurvatureMeasurement>,
+        fit: Option<&RowFitMeasurement>,
         out: &mut GuidanceEstimate,
     ) -> Option<(Measurement, FrameInfo)> {
         let o = &self.opts;
@@ -449,7 +491,7 @@ impl Guidance {
         self.index.clear();
         self.index.resize(self.normals.len(), None);
         let copts = CombOptions {
-            spacing_m: o.row_spacing_m,
+            spacing_m: o.row_spacing_m.or(self.spacing_hint),
             fixed_spacing: o.fixed_spacing,
             min_spacing_m: o.min_spacing_m,
             max_spacing_m: o.max_spacing_m,
@@ -478,7 +520,12 @@ impl Guidance {
         let offset = -(line - (line / s - 0.5).ceil() * s);
         // the followed kind's nearest line, left of the camera's foot point
         let curvature =
-            curvature.map(|m| (m.at_lateral(g.point_lateral_m(&tool) - offset), m.sd_per_m));
+            fit.and_then(|m| Some((m.at_lateral(g.point_lateral_m(&tool) - offset)?, m.sd_per_m)));
+        // from the camera's foot point to base_link's origin, along the rows
+        out.end_of_row_m = fit
+            .and_then(|m| m.end_of_rows_m)
+            .map(|e| e + g.along.dot(&g.camera_m))
+            .filter(|e| e.abs() <= rowfit::END_RANGE_M);
         let dir = g.along - g.up * g.along.dot(&g.up);
         let dir = dir / dir.norm();
         for (y, k) in self.ys.iter().zip(&self.index) {

@@ -40,6 +40,13 @@ pub struct SyntheticDriveOptions {
     /// along concentric rows (its yaw and offset relative to their tangents), see
     /// [`SynthOptions::curvature_per_m`].
     pub curvature_per_m: f64,
+    /// When positive: the rows end this far along from the drive's start, metres (the
+    /// robot drives on into the bare headland).
+    pub rows_end_m: f64,
+    /// When `gap_length_m` is positive: an empty stretch (no plant in any row) from
+    /// `gap_start_m` along, metres.
+    pub gap_start_m: f64,
+    pub gap_length_m: f64,
     /// Render threads (0: as many as the machine has).
     pub render_threads: usize,
 }
@@ -64,6 +71,9 @@ pub(crate) struct RawSynthetic {
     period_s: Raw<f64>,
     cross_at_s: Raw<f64>,
     curvature_per_m: Raw<f64>,
+    rows_end_m: Raw<f64>,
+    gap_start_m: Raw<f64>,
+    gap_length_m: Raw<f64>,
 }
 
 impl RawSynthetic {
@@ -131,6 +141,27 @@ impl RawSynthetic {
                 -0.2,
                 0.2,
             ),
+            rows_end_m: c.range(
+                "source.synthetic.rows_end_m",
+                &self.rows_end_m,
+                0.0,
+                0.0,
+                10_000.0,
+            ),
+            gap_start_m: c.range(
+                "source.synthetic.gap_start_m",
+                &self.gap_start_m,
+                0.0,
+                0.0,
+                10_000.0,
+            ),
+            gap_length_m: c.range(
+                "source.synthetic.gap_length_m",
+                &self.gap_length_m,
+                0.0,
+                0.0,
+                1_000.0,
+            ),
             render_threads: 0,
         }
     }
@@ -187,6 +218,9 @@ impl SyntheticDrive {
             plant_distance_m: 0.05,
             samples: 2,
             curvature_per_m: opts.curvature_per_m,
+            rows_end_m: (opts.rows_end_m > 0.0).then_some(opts.rows_end_m),
+            gap_m: (opts.gap_length_m > 0.0)
+                .then_some([opts.gap_start_m, opts.gap_start_m + opts.gap_length_m]),
             ..SynthOptions::default()
         };
         base.validate()?;
@@ -293,6 +327,9 @@ mod tests {
             period_s: 0.01,
             cross_at_s: 0.0,
             curvature_per_m: 0.0,
+            rows_end_m: 0.0,
+            gap_start_m: 0.0,
+            gap_length_m: 0.0,
             render_threads: 1,
         }
     }

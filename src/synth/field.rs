@@ -288,6 +288,9 @@ pub struct Field {
     weed_list: Vec<[f64; 2]>,
     /// The bend of a curved field (`None`: straight rows).
     bend: Option<Bend>,
+    /// Plant indices of the empty stretch (no plant of any row), inclusive; empty range
+    /// (1, 0) when there is none.
+    gap: (i64, i64),
 }
 
 /// Which plant, if any, covers a ground point.
@@ -317,7 +320,14 @@ impl Field {
         let row_min = (-half_width / s).ceil() as i64;
         let row_max = (half_width / s).floor() as i64;
         let k_min = (-opts.field_half_length_m / pd).ceil() as i64;
-        let k_max = (opts.field_half_length_m / pd).floor() as i64;
+        let mut k_max = (opts.field_half_length_m / pd).floor() as i64;
+        if let Some(end) = opts.rows_end_m {
+            k_max = k_max.min((end / pd).floor() as i64).max(k_min - 1);
+        }
+        let gap = match opts.gap_m {
+            Some([a, b]) => ((a / pd).ceil() as i64, (b / pd).floor() as i64),
+            None => (1, 0),
+        };
         let noisy = opts.along_sd_m > 0.0 || opts.across_sd_m > 0.0;
         let mut offsets = Vec::new();
         let (mut max_x, mut max_y) = (0.0f64, 0.0f64);
@@ -367,6 +377,7 @@ impl Field {
             weeds: WeedGrid::new(&weeds, camera_xy, half, reach),
             weed_list: weeds,
             bend,
+            gap,
         }
     }
 
@@ -395,6 +406,25 @@ impl Field {
     /// Stems (x, y) of the weeds, metres.
     pub fn weeds(&self) -> &[[f64; 2]] {
         &self.weed_list
+    }
+
+    /// Whether plant index `k` lies in the empty stretch.
+    #[inline]
+    fn in_gap(&self, k: i64) -> bool {
+        k >= self.gap.0 && k <= self.gap.1
+    }
+
+    /// Whether some plant grows within `reach` metres along the rows of arc position `u`
+    /// (the empty stretch and the rows' ends considered, position errors not).
+    pub fn crop_within(&self, u: f64, reach: f64) -> bool {
+        let lo = ceil_i((u - reach) * self.inv_distance).max(self.k_min);
+        let hi = floor_i((u + reach) * self.inv_distance).min(self.k_max);
+        lo <= hi && !(lo >= self.gap.0 && hi <= self.gap.1)
+    }
+
+    /// Arc position along the rows where the last plant grows, metres.
+    pub fn rows_end(&self) -> f64 {
+        self.k_max as f64 * self.plant_distance
     }
 
     /// The bend of a curved field (`None`: straight rows).
@@ -479,6 +509,9 @@ impl Field {
         let (lo, hi) = self.window(x, y, reach);
         for i in lo[0]..=hi[0] {
             for k in lo[1]..=hi[1] {
+                if self.in_gap(k) {
+                    continue;
+                }
                 f(i, k, self.plant_position(i, k));
             }
         }
@@ -506,7 +539,7 @@ impl Field {
         if i_lo <= i_hi {
             let k_lo = ceil_i((x0 - self.window_x) * self.inv_distance).max(self.k_min);
             let k_hi = floor_i((x1 + self.window_x) * self.inv_distance).min(self.k_max);
-            if k_lo <= k_hi {
+            if k_lo <= k_hi && !(k_lo >= self.gap.0 && k_hi <= self.gap.1) {
                 return false;
             }
         }
@@ -544,6 +577,9 @@ impl Field {
             for i in i_lo..=i_hi {
                 let yi = i as f64 * s;
                 for k in k_lo..=k_hi {
+                    if self.in_gap(k) {
+                        continue;
+                    }
                     let (ox, oy) = self.offset(i, k);
                     if let Some(edge) = self.shape.leaf_at(x - (k as f64 * pd + ox), y - (yi + oy))
                     {

@@ -75,6 +75,12 @@ pub struct SynthOptions {
     /// `along_m` is arc length along row 0. Rows farther than 0.8/|curvature| across are left
     /// out (they would wrap round the centre).
     pub curvature_per_m: f64,
+    /// Where the rows end (the headland beyond is bare ground), metres along the rows (world
+    /// x; arc length along row 0 in a curved field); `None`: at `field_half_length_m`.
+    pub rows_end_m: Option<f64>,
+    /// An empty stretch across every row, [from, to] metres along the rows: no plant grows
+    /// there (a gap in the crop, a track, a bare patch).
+    pub gap_m: Option<[f64; 2]>,
     /// Background noise: salt-and-pepper density (0..1) before the Gaussian smoothing.
     pub noise: f64,
     /// Standard deviation of the Gaussian smoothing that follows the salt and pepper, pixels.
@@ -114,6 +120,8 @@ impl Default for SynthOptions {
             field_half_length_m: 150.0,
             field_half_width_m: 150.0,
             curvature_per_m: 0.0,
+            rows_end_m: None,
+            gap_m: None,
             noise: 0.0,
             noise_blur_px: 1.0,
             along_sd_m: 0.0,
@@ -180,6 +188,20 @@ impl SynthOptions {
                 self.curvature_per_m,
                 "must be within ±0.2 per metre (radius 5 m or more)",
             );
+        }
+        if let Some(e) = self.rows_end_m {
+            if !(e.is_finite() && e.abs() <= 10_000.0) {
+                return bad("rows_end_m", e, "must be within ±10 km");
+            }
+        }
+        if let Some([a, b]) = self.gap_m {
+            if !(a.is_finite() && b.is_finite() && a < b && a.abs().max(b.abs()) <= 10_000.0) {
+                return bad(
+                    "gap_m",
+                    b - a,
+                    "must be [from, to] with from < to, within ±10 km",
+                );
+            }
         }
         if self.plant_distance_m < 0.005 {
             return bad(

@@ -3,7 +3,7 @@
 
 use super::scene::Scene;
 use crate::camera::Calibration;
-use crate::frame::{GroundTruth, NoiseTruth};
+use crate::frame::{GroundTruth, NoiseTruth, NO_CROP_RANGE_M};
 use crate::sphere::{axis_angle, distance_to_great_circle};
 use nalgebra::Vector3;
 
@@ -39,6 +39,8 @@ impl GroundTruth {
             row_spacing_m: s,
             plant_distance_m: o.plant_distance_m,
             curvature_per_m: o.curvature_per_m,
+            end_of_rows_m: o.rows_end_m.map(|_| scene.field.rows_end() - o.along_m),
+            no_crop: !scene.field.crop_within(o.along_m, NO_CROP_RANGE_M),
             noise: NoiseTruth {
                 background_density: o.noise,
                 along_row_sd_m: o.along_sd_m,

@@ -1,6 +1,6 @@
 //! Curvature of the rows, measured from their points on the ground.
 //!
-//! Owns [`CurvatureFit`] and the [`CurvatureMeasurement`] it gives. The detector reports rows
+//! Owns [`RowFit`] and the [`RowFitMeasurement`] it gives. The detector reports rows
 //! as great circles (straight lines on the ground); a curved row leaves its points off that
 //! line by its sagitta. Each kept image point (the detector's vegetation points, unit rays in
 //! the camera frame) is projected on the ground ([`GroundFrame::ray_on_ground`]) in the frame
@@ -28,7 +28,7 @@ use serde::{Deserialize, Serialize};
 
 /// Settings of the curvature fit.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct CurvatureOptions {
+pub struct RowFitOptions {
     /// Farthest distance along the rows, ahead and behind, of the points used, metres.
     pub range_m: f64,
     /// Farthest distance across the rows of the rows used, metres.
@@ -39,9 +39,9 @@ pub struct CurvatureOptions {
     pub min_sd_per_m: f64,
 }
 
-impl Default for CurvatureOptions {
+impl Default for RowFitOptions {
     fn default() -> Self {
-        CurvatureOptions {
+        RowFitOptions {
             range_m: 4.0,
             across_m: 2.0,
             min_points: 100,
@@ -52,27 +52,45 @@ impl Default for CurvatureOptions {
 
 /// One frame's curvature measurement.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct CurvatureMeasurement {
+pub struct RowFitMeasurement {
     /// Curvature of the row-parallel line through the camera's foot point, 1/m, positive
-    /// when it bends to the left. A line `y` metres to the left bends by `κ / (1 − κ·y)`.
-    pub curvature_per_m: f64,
+    /// when it bends to the left (`None`: too few points near the robot). A line `y` metres
+    /// to the left bends by `κ / (1 − κ·y)`.
+    pub curvature_per_m: Option<f64>,
     /// Its standard deviation, 1/m.
     pub sd_per_m: f64,
     /// Points in the fit.
     pub points: usize,
+    /// Distance ahead along the rows from the camera's foot point to where the rows end,
+    /// metres, when the points show it within [`END_RANGE_M`] (negative: behind, once past).
+    pub end_of_rows_m: Option<f64>,
+    /// Plants are seen on the rows within [`NEAR_M`] along them, ahead or behind (false: an
+    /// empty stretch or the headland around the robot, the rows seen only farther away).
+    pub crop_near: bool,
 }
 
-impl CurvatureMeasurement {
+impl RowFitMeasurement {
     /// Curvature of the row-parallel line `lateral_m` to the left of the camera's foot point.
-    pub fn at_lateral(&self, lateral_m: f64) -> f64 {
-        let k = self.curvature_per_m;
-        k / (1.0 - k * lateral_m)
+    pub fn at_lateral(&self, lateral_m: f64) -> Option<f64> {
+        self.curvature_per_m.map(|k| k / (1.0 - k * lateral_m))
     }
 }
 
 /// Detected lines closer than this across the rows are one row, metres (the detector may
 /// report both edges of a row; rows are at least 0.2 m apart, `min_spacing_m`).
 const MERGE_M: f64 = 0.12;
+
+/// Bins of the rows' points along the rows, ahead and behind, for the end of the rows.
+const END_BIN_M: f64 = 0.2;
+const END_BINS: usize = 40;
+/// The rows end where the points ahead stay below this share of those behind (at the same
+/// distances) over [`END_EMPTY_M`].
+const END_RATIO: f64 = 0.15;
+const END_EMPTY_M: f64 = 2.4;
+/// Farthest end of the rows reported, metres ahead (and behind, once past).
+pub const END_RANGE_M: f64 = 5.0;
+/// Along the rows, ahead and behind, within which plants make [`RowFitMeasurement::crop_near`].
+pub const NEAR_M: f64 = 3.0;
 
 /// Image points of one plant whose errors go together (the fit's variance is inflated by it).
 const CORRELATED_PIXELS: f64 = 20.0;
@@ -82,8 +100,8 @@ type Sums = [f64; 10];
 
 /// The curvature fit for one camera (one per detector worker: it keeps buffers).
 #[derive(Debug, Clone, PartialEq)]
-pub struct CurvatureFit {
-    opts: CurvatureOptions,
+pub struct RowFit {
+    opts: RowFitOptions,
     mounting: Mounting,
     robot_from_camera: Rotation3<f64>,
     /// Detected rows' lateral positions on the ground, ascending.
@@ -98,9 +116,9 @@ struct Arcs {
     kappa: f64,
 }
 
-impl CurvatureFit {
-    pub fn new(mounting: Mounting, opts: CurvatureOptions) -> Self {
-        CurvatureFit {
+impl RowFit {
+    pub fn new(mounting: Mounting, opts: RowFitOptions) -> Self {
+        RowFit {
             opts,
             mounting,
             robot_from_camera: mounting.robot_from_camera(),
@@ -118,7 +136,7 @@ impl CurvatureFit {
         normals: impl IntoIterator<Item = [f64; 3]>,
         rays: &[[f32; 3]],
         weights: &[f32],
-    ) -> Option<CurvatureMeasurement> {
+    ) -> Option<RowFitMeasurement> {
         let frame = GroundFrame::with_rotation(
             &Vector3::from(*vp),
             &self.robot_from_camera,
@@ -172,7 +190,86 @@ impl CurvatureFit {
                 None => break,
             }
         }
-        result.filter(|m| m.points >= self.opts.min_points)
+        let mut m = result
+            .filter(|m| m.points >= self.opts.min_points)
+            .unwrap_or(RowFitMeasurement {
+                curvature_per_m: None,
+                sd_per_m: f64::INFINITY,
+                points: 0,
+                end_of_rows_m: None,
+                crop_near: false,
+            });
+        if m.curvature_per_m.is_none() {
+            arcs = Arcs::default();
+        }
+        (m.end_of_rows_m, m.crop_near) = self.along_the_rows(&frame, rays, weights, gate, &arcs);
+        Some(m)
+    }
+
+    /// The rows' points along them: where they end (the distance ahead of the camera's foot
+    /// point, negative behind, within [`END_RANGE_M`]) and whether any grow within
+    /// [`NEAR_M`]. A bin of the rows counts as planted when its points' ground area reaches
+    /// [`END_RATIO`] of the larger of the two bins at the same distance ahead and behind (the
+    /// lens sees both alike) and that larger one is not empty; the rows end where planted
+    /// bins give way to [`END_EMPTY_M`] of unplanted ones.
+    fn along_the_rows(
+        &self,
+        frame: &GroundFrame,
+        rays: &[[f32; 3]],
+        weights: &[f32],
+        gate: f64,
+        arcs: &Arcs,
+    ) -> (Option<f64>, bool) {
+        let mut ahead = [0.0f64; END_BINS];
+        let mut behind = [0.0f64; END_BINS];
+        let h = frame.height_m;
+        for (ray, &w) in rays.iter().zip(weights) {
+            let ray = Vector3::new(ray[0] as f64, ray[1] as f64, ray[2] as f64);
+            let Some([a, l]) = frame.ray_on_ground(&(self.robot_from_camera * ray)) else {
+                continue;
+            };
+            let bin = (a.abs() / END_BIN_M) as usize;
+            if bin >= END_BINS || !self.near_an_arc(a, l, gate, arcs) {
+                continue;
+            }
+            let dist2 = a * a + l * l + h * h;
+            let w = w as f64 * dist2 * dist2.sqrt() / h;
+            if a >= 0.0 {
+                ahead[bin] += w;
+            } else {
+                behind[bin] += w;
+            }
+        }
+        let top = ahead.iter().chain(&behind).fold(0.0f64, |m, &v| m.max(v));
+        // bins in order along the rows: i < END_BINS behind (farthest first), then ahead
+        let planted = |i: usize| -> bool {
+            let (w, j) = if i < END_BINS {
+                (behind[END_BINS - 1 - i], END_BINS - 1 - i)
+            } else {
+                (ahead[i - END_BINS], i - END_BINS)
+            };
+            let r = ahead[j].max(behind[j]);
+            top > 0.0 && r >= 0.01 * top && w >= END_RATIO * r
+        };
+        let near = (NEAR_M / END_BIN_M).round() as usize;
+        let crop_near = (END_BINS - near..END_BINS + near).any(planted);
+        let win = (END_EMPTY_M / END_BIN_M).round() as usize;
+        let reach = (END_RANGE_M / END_BIN_M).round() as usize;
+        let first = END_BINS.saturating_sub(reach).max(1);
+        let last = (END_BINS + reach).min(2 * END_BINS - win);
+        let end = (first..=last)
+            .find(|&i| planted(i - 1) && !(i..i + win).any(planted))
+            .map(|i| (i as f64 - END_BINS as f64) * END_BIN_M);
+        (end, crop_near)
+    }
+
+    /// Whether ground point (a, l) lies within `gate` across of a row's predicted arc.
+    fn near_an_arc(&self, a: f64, l: f64, gate: f64, arcs: &Arcs) -> bool {
+        let shift = arcs.beta * a;
+        self.lines.iter().any(|&y| {
+            let k = arcs.kappa / (1.0 - arcs.kappa * y);
+            (l - (y + shift + k * a * a / 2.0)).abs() < gate
+        })
     }
 
     /// Sums the points within `reach` along the rows that lie within `gate` across of a
@@ -233,7 +330,7 @@ impl CurvatureFit {
 
     /// Solves for the common turn and curvature (two fixed-point rounds for the rows' own
     /// curvatures `κ_i`), starting from `prev`'s curvature.
-    fn solve(&self, prev: &Arcs) -> Option<(Arcs, CurvatureMeasurement)> {
+    fn solve(&self, prev: &Arcs) -> Option<(Arcs, RowFitMeasurement)> {
         let mut kappa = prev.kappa;
         let mut out = None;
         for _ in 0..3 {
@@ -274,10 +371,12 @@ impl CurvatureFit {
             kappa = k;
             out = Some((
                 Arcs { beta, kappa: k },
-                CurvatureMeasurement {
-                    curvature_per_m: k,
+                RowFitMeasurement {
+                    curvature_per_m: Some(k),
                     sd_per_m: sd.max(self.opts.min_sd_per_m),
                     points: n as usize,
+                    end_of_rows_m: None,
+                    crop_near: true,
                 },
             ));
         }
@@ -293,7 +392,7 @@ mod tests {
     use crate::synth::{render, SynthOptions};
 
     /// Renders a field of curvature `k`, runs the detector and the fit: the measurement.
-    fn measured(k: f64, lateral: f64, yaw_deg: f64) -> CurvatureMeasurement {
+    fn measured(k: f64, lateral: f64, yaw_deg: f64) -> RowFitMeasurement {
         let cal = ideal_fisheye(512, 612).unwrap();
         let opts = SynthOptions {
             curvature_per_m: k,
@@ -308,7 +407,7 @@ mod tests {
         let mut out = Detection::default();
         det.process(&frame.view().unwrap(), &mut out).unwrap();
         let vp = out.vanishing_point.expect("a vanishing point").direction;
-        let mut fit = CurvatureFit::new(cal.mounting, CurvatureOptions::default());
+        let mut fit = RowFit::new(cal.mounting, RowFitOptions::default());
         let p = det.points();
         fit.measure(
             &vp.into(),
@@ -325,26 +424,28 @@ mod tests {
         for (k, lat, yaw) in [(0.05, 0.25, 3.0), (-0.02, 0.1, -4.0)] {
             let m = measured(k, lat, yaw);
             let truth = k / (1.0 - k * lat);
-            let err = (m.curvature_per_m - truth) / truth;
+            assert!(m.crop_near && m.end_of_rows_m.is_none(), "{m:?}");
+            let c = m.curvature_per_m.unwrap();
+            let err = (c - truth) / truth;
             assert!(err.abs() < 0.05, "{k}: {m:?} vs {truth}");
             assert!(m.points > 1000 && m.sd_per_m < 0.01, "{m:?}");
             // a line one spacing to the left bends by c / (1 − c·y)
-            let left = m.at_lateral(0.5);
-            let c = m.curvature_per_m;
+            let left = m.at_lateral(0.5).unwrap();
             assert!((left - c / (1.0 - c * 0.5)).abs() < 1e-12);
         }
         let m = measured(0.0, 0.25, 0.0);
-        assert!(m.curvature_per_m.abs() < 0.002, "{m:?}");
+        assert!(m.curvature_per_m.unwrap().abs() < 0.002, "{m:?}");
     }
 
     #[test]
     fn too_few_points_or_no_rows_give_nothing() {
-        let mut fit = CurvatureFit::new(Mounting::default(), CurvatureOptions::default());
+        let mut fit = RowFit::new(Mounting::default(), RowFitOptions::default());
         let rays = [[0.0f32, 0.0, 1.0]; 10];
         let w = [1.0f32; 10];
         // rows along the camera's x axis (the default mounting looks down)
         let vp = [1.0, 0.0, 0.0];
-        assert!(fit.measure(&vp, [[0.0, 1.0, 0.0]], &rays, &w).is_none());
+        let m = fit.measure(&vp, [[0.0, 1.0, 0.0]], &rays, &w).unwrap();
+        assert!(m.curvature_per_m.is_none() && !m.crop_near && m.end_of_rows_m.is_none());
         assert!(fit.measure(&vp, [], &rays, &w).is_none());
         assert!(fit
             .measure(&[0.0, 0.0, 0.0], [[0.0, 1.0, 0.0]], &rays, &w)
