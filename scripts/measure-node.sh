@@ -1,8 +1,10 @@
 #!/usr/bin/env bash
 # Measures the node at the GC2450C's full resolution (2448x2050 Bayer RGGB): replay as fast
 # as possible, end-to-end latency at 15 fps, peak RSS with and without recording, and
-# recording throughput at 15 fps. Usage: scripts/measure-node.sh [WORKDIR]
-# Needs a release build (cargo build --release) and GNU time (/usr/bin/time).
+# recording throughput at 15 fps, and the pipeline's latency with the HTTP service under load.
+# Usage: scripts/measure-node.sh [WORKDIR]; OMNIROW_MEASURE_ONLY=http runs only the HTTP
+# section (after the recording it replays), OMNIROW_MEASURE_HTTP_PAIRS=N its pairs (3).
+# Needs a release build (cargo build --release), GNU time (/usr/bin/time) and python3.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 B=target/release/omnirow
@@ -25,6 +27,7 @@ $B record --out "$W/rec" --frames 16 --no-print --config "$W/full.toml" 2>"$W/re
 F=$(ls "$W"/rec/*.mcap)
 ls -l "$F"
 
+if [ "${OMNIROW_MEASURE_ONLY:-}" != http ]; then
 echo "== replay as fast as possible, 20 s, looping"
 /usr/bin/time -v $B run --replay "$F" --rate max --loop --duration 20 --no-print \
   --config "$W/full.toml" 2>"$W/max.log" || true
@@ -40,41 +43,85 @@ echo "== replay at 15 fps while recording (75 MB/s), 20 s"
   --config "$W/full.toml" 2>"$W/recrt.log" || true
 fin "$W/recrt.log"; echo "peak RSS (recording): $(rss "$W/recrt.log")"
 du -sh "$W/rec2"
+fi
 
-# The HTTP service under load (docs/http.md): the same 15 fps replay with the service on,
-# alone and while a client fetches /metrics 200 times a second (a new connection each time,
-# as a scraper without keep-alive), alternated twice; compare latency_p99_ms.
+# The HTTP service under load (docs/http.md): pairs of 12 s replays at 15 fps with the service
+# on, one without a client and one while a client fetches /metrics 200 times a second for 10 s
+# (a new connection each time, as a scraper without keep-alive; from when /healthz first
+# answers), in turn (A B A B ...) so that the machine's drift hits both alike. Per run, the p99
+# of the end-to-end latency of the frames received after the first second; per pair, the
+# difference and the ratio loaded / idle; at the end their medians.
 PORT=${OMNIROW_MEASURE_HTTP_PORT:-18347}
+PAIRS=${OMNIROW_MEASURE_HTTP_PAIRS:-3}
 sed '/^\[http\]/,$d' "$W/full.toml" > "$W/http.toml"
 printf '[http]\nlisten = "127.0.0.1:%s"\n' "$PORT" >> "$W/http.toml"
 load() {
   python3 - "$PORT" "$1" "$2" <<'PY'
 import http.client, sys, time
 port, rate, seconds = int(sys.argv[1]), float(sys.argv[2]), float(sys.argv[3])
-time.sleep(2)  # the node starts
-t0 = time.monotonic(); n = errors = 0; worst = 0.0
+def get(path):
+    c = http.client.HTTPConnection("127.0.0.1", port, timeout=5)
+    try:
+        c.request("GET", path); r = c.getresponse(); r.read(); return r.status
+    finally:
+        c.close()
+# The node starts: begin once it serves (its first frames flow about then).
+started = time.monotonic()
+while time.monotonic() - started < 30:
+    try:
+        if get("/healthz") == 200:
+            break
+    except OSError:
+        pass
+    time.sleep(0.05)
+t0 = time.monotonic(); n = errors = 0; worst = 0.0; kinds = {}
 while (now := time.monotonic()) - t0 < seconds:
     due = t0 + n / rate
     if due > now:
         time.sleep(due - now)
     t = time.monotonic()
     try:
-        c = http.client.HTTPConnection("127.0.0.1", port, timeout=5)
-        c.request("GET", "/metrics"); r = c.getresponse(); r.read(); c.close()
-        errors += r.status != 200
-    except OSError:
-        errors += 1
+        status = get("/metrics")
+        if status != 200:
+            errors += 1; kinds[status] = kinds.get(status, 0) + 1
+    except OSError as e:
+        errors += 1; kinds[type(e).__name__] = kinds.get(type(e).__name__, 0) + 1
     worst = max(worst, time.monotonic() - t); n += 1
-print(f"load: {n} GET /metrics in {time.monotonic() - t0:.1f} s ({n / (time.monotonic() - t0):.0f}/s), {errors} errors, slowest {worst * 1000:.1f} ms")
+print(f"load: {n} GET /metrics in {time.monotonic() - t0:.1f} s ({n / (time.monotonic() - t0):.0f}/s), {errors} errors {kinds or ''}, slowest {worst * 1000:.1f} ms")
 PY
 }
-for pass in 1 2; do
-  echo "== pass $pass: replay at 15 fps, 20 s, HTTP on, no client"
-  $B run --replay "$F" --loop --duration 20 --no-print --config "$W/http.toml" 2>"$W/http-idle.log" || true
-  fin "$W/http-idle.log"
-  echo "== pass $pass: the same while GET /metrics 200 times a second for 16 s"
-  load 200 16 &
-  $B run --replay "$F" --loop --duration 20 --no-print --config "$W/http.toml" 2>"$W/http-load.log" || true
+# The p99 latency (ms) and frame count of the estimates in $1 received 1 s or more after the
+# first (the node serves HTTP from about its first frame, and the load begins then).
+window_p99() {
+  python3 - "$1" <<'PY'
+import json, sys
+est = [json.loads(l) for l in open(sys.argv[1]) if l.startswith("{")]
+est = [e for e in est if e.get("status") != "camera_lost"]
+t0 = est[0]["receive_ns"] if est else 0
+lat = sorted(e["latency_ms"] for e in est if e["receive_ns"] >= t0 + 1e9)
+q = lambda f: lat[min(len(lat) - 1, int(f * len(lat)))] if lat else float("nan")
+print(f"{q(0.99):.2f} {len(lat)} {q(0.5):.2f}")
+PY
+}
+: > "$W/http-pairs.txt"
+for pair in $(seq "$PAIRS"); do
+  $B run --replay "$F" --loop --duration 12 --print --config "$W/http.toml" \
+    >"$W/http-idle-$pair.jsonl" 2>"$W/http-idle-$pair.log" || true
+  # The client runs on the node's cores at the same priority as the pipeline (a scraper is
+  # usually another machine): its own CPU time counts against the service here.
+  load 200 10 >"$W/http-load-$pair.txt" &
+  $B run --replay "$F" --loop --duration 12 --print --config "$W/http.toml" \
+    >"$W/http-load-$pair.jsonl" 2>"$W/http-load-$pair.log" || true
   wait
-  fin "$W/http-load.log"
+  read -r idle n_idle idle50 < <(window_p99 "$W/http-idle-$pair.jsonl")
+  read -r loaded n_loaded loaded50 < <(window_p99 "$W/http-load-$pair.jsonl")
+  echo "$idle $loaded" >> "$W/http-pairs.txt"
+  echo "== pair $pair: latency p99 (p50) idle $idle ($idle50) ms, $n_idle frames; under /metrics load $loaded ($loaded50) ms, $n_loaded frames; $(cat "$W/http-load-$pair.txt")"
 done
+python3 - "$W/http-pairs.txt" <<'PY'
+import statistics, sys
+pairs = [tuple(map(float, l.split())) for l in open(sys.argv[1]) if l.strip()]
+d = statistics.median(b - a for a, b in pairs)
+r = statistics.median(b / a for a, b in pairs)
+print(f"== HTTP load over {len(pairs)} pairs: median difference loaded - idle {d:+.2f} ms, median ratio loaded / idle {r:.3f}")
+PY

@@ -96,7 +96,8 @@ fn missing_file_is_an_error_naming_it() {
 #[test]
 fn config_detector_shows_the_scales_of_a_calibration() {
     let root = env!("CARGO_MANIFEST_DIR");
-    let scales = |file: &str| -> f64 {
+    // (the Hough cell in pixels, the accumulator's side in force)
+    let scales = |file: &str| -> (f64, usize) {
         let out = bin()
             .args(["config", "detector", "--calib"])
             .arg(format!("{root}/config/calib/{file}"))
@@ -114,16 +115,27 @@ fn config_detector_shows_the_scales_of_a_calibration() {
             .nth(1)
             .and_then(|t| t.trim().trim_end_matches("px").trim().parse().ok())
             .unwrap_or_else(|| panic!("{line}"));
-        px
+        // The values in force are written out, so that they can be pasted and fixed.
+        let bins: usize = text
+            .lines()
+            .find_map(|l| l.strip_prefix("phi_bins = "))
+            .and_then(|t| t.trim().parse().ok())
+            .unwrap_or_else(|| panic!("{text}"));
+        (px, bins)
     };
-    // The same 2° Hough cell spans more pixels through a lens with three times the focal
-    // length: three times at the centre, less over the whole image (the wide lens's
-    // off-centre pixels are smaller angles, which raises its median resolution).
-    let (a, b) = (
+    // The Hough cell is a share of the field of view's extent: about the same number of
+    // pixels through a lens with three times the focal length, so about 2.5 times the cells
+    // over the sphere (the wide lens's 1.74 sr have an extent 2.4 times the narrow one's
+    // 0.30 sr), and the GC2450C keeps its 90 cells of 2°.
+    let ((a, na), (b, nb)) = (
         scales("pinhole_512_f300.toml"),
         scales("pinhole_512_f900.toml"),
     );
-    assert!(b / a > 2.2 && b / a < 3.05, "{a} px against {b} px");
+    assert!((b / a - 1.0).abs() < 0.2, "{a} px against {b} px");
+    let r = nb as f64 / na as f64;
+    assert!(r > 2.2 && r < 2.7, "{na} cells against {nb}");
+    assert_eq!(scales("fisheye185_gc2450c.toml").1, 90);
+    assert_eq!(scales("pal_gc2450c.toml").1, 90);
     let out = bin()
         .args(["config", "detector", "--calib", "/nonexistent/calib.toml"])
         .output()

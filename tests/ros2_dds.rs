@@ -655,13 +655,39 @@ fn ddsls_sees_the_publications_and_ros_discovery_names_their_writers() {
 fn reliability_is_what_the_config_says() {
     let Some(venv) = venv() else { return };
     // Best effort (the default): a best-effort reader gets samples, a reliable one is not
-    // matched at all (DDS request/offer rules), both listening at the same time.
+    // matched at all (DDS request/offer rules), both listening at the same time. The row
+    // topics are reliable by default: a reliable reader (ROS 2's default QoS, as row-follow
+    // controllers subscribe) and the best-effort one are both served.
     let d = domain(2);
-    let be = Subscriber::start(&venv, d, &["--want", "orientation=3", "--timeout", "30"]);
+    let be = Subscriber::start(
+        &venv,
+        d,
+        &[
+            "--want",
+            "orientation=3",
+            "--want",
+            "row_offset=3",
+            "--timeout",
+            "30",
+        ],
+    );
     let rel = Subscriber::start(
         &venv,
         d,
         &["--want", "orientation=1", "--reliable", "--timeout", "8"],
+    );
+    let rel_rows = Subscriber::start(
+        &venv,
+        d,
+        &[
+            "--want",
+            "row_offset=3",
+            "--want",
+            "row_pose=3",
+            "--reliable",
+            "--timeout",
+            "30",
+        ],
     );
     let mut p = Ros2Publisher::new(&config(d)).unwrap();
     let mut be = be;
@@ -680,6 +706,8 @@ fn reliability_is_what_the_config_says() {
         code, 1,
         "a reliable reader matched a best-effort writer: {samples:?}"
     );
+    let (code, _) = rel_rows.finish(Duration::from_secs(5));
+    assert_eq!(code, 0, "a reliable reader got no row guidance");
     drop(p);
 
     // Reliable configured: the reliable reader is served.

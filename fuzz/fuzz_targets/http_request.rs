@@ -20,6 +20,7 @@ fn server() -> SocketAddr {
                 "127.0.0.1:0".parse().unwrap(),
                 Arc::new(Shared::new()),
                 overlay,
+                Arc::default(),
             )
             .expect("HTTP service starts on loopback");
             let addr = s.local_addr();

@@ -41,13 +41,30 @@ pub fn run(cmd: ConfigCommand) -> anyhow::Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         ConfigCommand::Detector { calib } => {
-            if let Some(path) = calib {
-                let cal = crate::camera::Calibration::load(&path)?;
-                let report = crate::detect::scale::scales_report(&cal, &Default::default())
-                    .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
-                println!("# The detector's scales for {}:\n{report}", path.display());
-            }
-            print!("{}", detector_defaults()?);
+            let Some(path) = calib else {
+                print!("{}", detector_defaults()?);
+                return Ok(ExitCode::SUCCESS);
+            };
+            let cal = crate::camera::Calibration::load(&path)?;
+            let defaults = crate::detect::DetectorOptions::default();
+            let in_force = crate::detect::scale::resolve(&cal, &defaults)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?
+                .0;
+            let report = crate::detect::scale::scales_report(&cal, &defaults)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+            println!("# The detector's scales for {}:\n{report}", path.display());
+            print!(
+                "{}",
+                detector_toml(
+                    &in_force,
+                    &format!(
+                        "# omnirow's detector options in force for {} (`omnirow config detector \
+                         --calib`):\n# the angular options derived from it are written out; \
+                         paste only what you mean to fix.\n",
+                        path.display()
+                    )
+                )?
+            );
             Ok(ExitCode::SUCCESS)
         }
     }
@@ -55,17 +72,27 @@ pub fn run(cmd: ConfigCommand) -> anyhow::Result<ExitCode> {
 
 /// The detector's default options as TOML tables under `[detector]`.
 pub fn detector_defaults() -> anyhow::Result<String> {
-    #[derive(serde::Serialize)]
-    struct Wrapper {
-        detector: crate::detect::DetectorOptions,
-    }
-    let text = toml::to_string(&Wrapper {
-        detector: crate::detect::DetectorOptions::default(),
-    })?;
-    Ok(format!(
+    detector_toml(
+        &crate::detect::DetectorOptions::default(),
         "# omnirow's detector options and their defaults (`omnirow config detector`).\n\
-         # Paste into the node's configuration and keep only what you change.\n\n{text}"
-    ))
+         # Paste into the node's configuration and keep only what you change.\n\
+         # Absent here, derived from the calibration's angular resolution unless set\n\
+         # (`omnirow config detector --calib FILE` shows their values in force): angle_scale,\n\
+         # hough.phi_bins, hough.theta_bins, hough.min_tolerance_deg, hough.merge_angle_deg,\n\
+         # vanishing.azimuth_bins, vanishing.elevation_bin_deg, vanishing.inlier_deg,\n\
+         # vanishing.min_spread_deg, combined.pair_max_deg, pencil.polish_max_band_deg,\n\
+         # edge.merge.max_angle_rad.\n",
+    )
+}
+
+/// `opts` as TOML tables under `[detector]`, after `header`.
+fn detector_toml(opts: &crate::detect::DetectorOptions, header: &str) -> anyhow::Result<String> {
+    #[derive(serde::Serialize)]
+    struct Wrapper<'a> {
+        detector: &'a crate::detect::DetectorOptions,
+    }
+    let text = toml::to_string(&Wrapper { detector: opts })?;
+    Ok(format!("{header}\n{text}"))
 }
 
 #[cfg(test)]

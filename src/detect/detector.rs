@@ -48,6 +48,12 @@ pub struct DetectorOptions {
     /// Largest expected tilt of the robot (degrees): bounds the sky mask and the search for
     /// the vanishing point.
     pub max_tilt_deg: f64,
+    /// The factor every angular option left absent is its reference value times (the
+    /// Hough and vanishing cells, the refinement's, merge, inlier, spread and pairing
+    /// angles): absent, the calibration's field of view's extent over the GC2450C's, at
+    /// most 1, so that those scales are a fixed share of the field of view
+    /// ([`super::scale`]). 1 keeps the values in degrees that fit the GC2450C.
+    pub angle_scale: Option<f64>,
     pub binning: Binning,
     pub auto_bin_above_px: u64,
     pub vegetation: VegetationOptions,
@@ -96,13 +102,24 @@ pub struct CombinedOptions {
     pub pair_edge_rows: bool,
     /// The largest angle (degrees, around the vanishing point) between a Hough row and an
     /// edge boundary paired with it. Default 5 (the half-width of a crop row seen from the
-    /// camera is a few degrees; neighbouring rows are farther apart).
-    pub pair_max_deg: f64,
+    /// camera is a few degrees; neighbouring rows are farther apart). Absent: derived from
+    /// the calibration's field of view (5° at the GC2450C's; [`super::scale`]).
+    pub pair_max_deg: Option<f64>,
     /// The combined method reports only the edge rows consistent with its vanishing point
     /// (within `vanishing.inlier_deg`); the Hough rows are all reported, as by the Hough
     /// method. The edge method's boundaries of sparse rows are mostly stray plant outlines,
     /// which would otherwise count as wrong rows. Default true.
     pub reject_edge_outliers: bool,
+}
+
+/// The pairing angle (degrees) at the reference angular resolution.
+pub const REFERENCE_PAIR_MAX_DEG: f64 = 5.0;
+
+impl CombinedOptions {
+    /// The pairing angle (degrees) in force (the option, else the reference value).
+    pub fn pair_max_deg(&self) -> f64 {
+        self.pair_max_deg.unwrap_or(REFERENCE_PAIR_MAX_DEG)
+    }
 }
 
 impl Default for CombinedOptions {
@@ -113,7 +130,7 @@ impl Default for CombinedOptions {
             precision_floor_mrad: 0.02,
             consensus: true,
             pair_edge_rows: true,
-            pair_max_deg: 5.0,
+            pair_max_deg: None,
             reject_edge_outliers: true,
         }
     }
@@ -124,6 +141,7 @@ impl Default for DetectorOptions {
         DetectorOptions {
             method: Method::Combined,
             max_tilt_deg: 15.0,
+            angle_scale: None,
             binning: Binning::Auto,
             auto_bin_above_px: 1_600_000,
             vegetation: VegetationOptions::default(),
@@ -601,14 +619,18 @@ pub struct Detector {
 }
 
 impl Detector {
+    /// A detector for images of `cal` (at its size; another size scales it). Every angular
+    /// option left absent is derived from the calibration's field of view
+    /// ([`super::scale::resolve`]); [`Detector::options`] gives the values in force.
     pub fn new(cal: &Calibration, opts: DetectorOptions) -> Result<Self, DetectError> {
+        let opts = super::scale::resolve(cal, &opts)?.0;
         let w = opts.combined.edge_weight;
         if !(w > 0.0 && w < 1.0) {
             return Err(DetectError::Options(format!(
                 "combined.edge_weight = {w} must be within (0, 1)"
             )));
         }
-        let p = opts.combined.pair_max_deg;
+        let p = opts.combined.pair_max_deg();
         if !(p > 0.0 && p < 45.0) {
             return Err(DetectError::Options(format!(
                 "combined.pair_max_deg = {p} must be within (0, 45)"
@@ -742,7 +764,7 @@ impl Detector {
             self.refit_hough_by_precision(out);
         }
         if method == Method::Combined && self.opts.combined.reject_edge_outliers {
-            let sin_tol = self.opts.vanishing.inlier_deg.to_radians().sin();
+            let sin_tol = self.opts.vanishing.inlier_deg().to_radians().sin();
             let v = out.vanishing_point.map(|v| v.direction);
             out.rows.retain(|r| {
                 r.method != Method::Edge || v.is_some_and(|v| r.normal.dot(&v).abs() < sin_tol)
@@ -790,7 +812,7 @@ impl Detector {
                 &out.rows,
                 &self.final_inliers,
                 &vp.direction,
-                self.opts.combined.pair_max_deg.to_radians(),
+                self.opts.combined.pair_max_deg().to_radians(),
                 &mut self.paired_rows,
                 &mut self.paired_inliers,
                 &mut self.pair_scratch,
@@ -859,7 +881,7 @@ impl Detector {
         let Some(vote) = out.vanishing_point else {
             return Ok(());
         };
-        let sin_tol = self.opts.vanishing.inlier_deg.to_radians().sin();
+        let sin_tol = self.opts.vanishing.inlier_deg().to_radians().sin();
         let mut best = consensus_score(&out.rows, &vote.direction, sin_tol).score();
         let mut chosen: Option<Vector3<f64>> = None;
         for only in [Method::Hough, Method::Edge] {
@@ -976,7 +998,7 @@ impl Detector {
         let a = crate::sphere::any_perpendicular(&vp);
         let b = vp.cross(&a);
         let angle = |n: &Vector3<f64>| n.dot(&b).atan2(n.dot(&a)).rem_euclid(std::f64::consts::PI);
-        let max_band = self.opts.pencil.polish_max_band_deg.to_radians();
+        let max_band = self.opts.pencil.polish_max_band_deg().to_radians();
         self.pencil_bands.clear();
         for (i, r) in out.rows.iter().enumerate() {
             let pi = angle(&r.normal);
@@ -1159,7 +1181,7 @@ mod tests {
             .to_string();
         assert!(e.contains("bogus"), "{e}");
         let o: DetectorOptions = toml::from_str("[hough]\nphi_bins = 60\n").unwrap();
-        assert_eq!(o.hough.phi_bins, 60);
-        assert_eq!(o.hough.theta_bins, 90);
+        assert_eq!(o.hough.phi_bins, Some(60));
+        assert_eq!(o.hough.theta_bins, None);
     }
 }

@@ -2,7 +2,8 @@
 //!
 //! Owns the accumulator over the normals n(φ, θ) = (sin φ cos θ, sin φ sin θ, cos φ) of great
 //! circles, its voting, the peaks and their refinement. A normal and its opposite are the same
-//! row, so the accumulator covers φ ∈ [0, π) × θ ∈ [0, π) once (90 × 90 cells by default, 2° each);
+//! row, so the accumulator covers φ ∈ [0, π) × θ ∈ [0, π) once (90 × 90 cells of 2° at the GC2450C's
+//! angular resolution, finer for finer lenses: [`super::scale`]);
 //! it wraps in φ at the poles ((−ε, θ) ≡ (π − ε, θ)) and in θ with a flip ((φ, θ + π) ≡ (π − φ, θ)).
 //!
 //! Each ray p votes for every great circle through it: for θ, eq. 4 gives
@@ -24,10 +25,11 @@ use std::f32::consts::PI as PI32;
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct HoughOptions {
-    /// Accumulator cells along φ (0..π).
-    pub phi_bins: usize,
-    /// Accumulator cells along θ (0..π; θ + π is the same row).
-    pub theta_bins: usize,
+    /// Accumulator cells along φ (0..π). Default (absent): derived from the calibration's
+    /// angular resolution (90, 2° cells, at the GC2450C's; see [`super::scale`]).
+    pub phi_bins: Option<usize>,
+    /// Accumulator cells along θ (0..π; θ + π is the same row). Default: as `phi_bins`.
+    pub theta_bins: Option<usize>,
     /// At most this many rows are reported (strongest first).
     pub max_rows: usize,
     /// Peaks with fewer votes, and refined rows with less support, are dropped.
@@ -38,10 +40,12 @@ pub struct HoughOptions {
     pub nms_radius: usize,
     /// Iterations of the refinement fit.
     pub refine_iterations: usize,
-    /// The refinement never narrows its band below this half-width (degrees).
-    pub min_tolerance_deg: f64,
-    /// Refined rows closer than this (degrees between normals) are one row.
-    pub merge_angle_deg: f64,
+    /// The refinement never narrows its band below this half-width (degrees). Default: from
+    /// the calibration (0.15° at the GC2450C's resolution).
+    pub min_tolerance_deg: Option<f64>,
+    /// Refined rows closer than this (degrees between normals) are one row. Default: from
+    /// the calibration (1° at the GC2450C's resolution).
+    pub merge_angle_deg: Option<f64>,
     /// A row whose points do not single out a great circle (ratio of the two smallest
     /// eigenvalues of their scatter matrix above this) is dropped.
     pub max_degeneracy: f64,
@@ -55,28 +59,55 @@ pub struct HoughOptions {
 impl Default for HoughOptions {
     fn default() -> Self {
         HoughOptions {
-            phi_bins: 90,
-            theta_bins: 90,
+            phi_bins: None,
+            theta_bins: None,
             max_rows: 12,
             min_support: 40,
             min_peak_fraction: 0.1,
             nms_radius: 2,
             refine_iterations: 6,
-            min_tolerance_deg: 0.15,
-            merge_angle_deg: 1.0,
+            min_tolerance_deg: None,
+            merge_angle_deg: None,
             max_degeneracy: 0.2,
             vote_points: 3_000,
         }
     }
 }
 
+/// The Hough defaults at the reference angular resolution ([`super::scale`]).
+pub const REFERENCE_BINS: usize = 90;
+pub const REFERENCE_MIN_TOLERANCE_DEG: f64 = 0.15;
+pub const REFERENCE_MERGE_ANGLE_DEG: f64 = 1.0;
+
 impl HoughOptions {
+    /// Cells along φ in force (the option, else the reference value).
+    pub fn phi_bins(&self) -> usize {
+        self.phi_bins.unwrap_or(REFERENCE_BINS)
+    }
+
+    /// Cells along θ in force.
+    pub fn theta_bins(&self) -> usize {
+        self.theta_bins.unwrap_or(REFERENCE_BINS)
+    }
+
+    /// The refinement's narrowest band (degrees) in force.
+    pub fn min_tolerance_deg(&self) -> f64 {
+        self.min_tolerance_deg
+            .unwrap_or(REFERENCE_MIN_TOLERANCE_DEG)
+    }
+
+    /// The merge angle (degrees) in force.
+    pub fn merge_angle_deg(&self) -> f64 {
+        self.merge_angle_deg.unwrap_or(REFERENCE_MERGE_ANGLE_DEG)
+    }
+
     pub fn validate(&self) -> Result<(), DetectError> {
         let bad = |m: String| Err(DetectError::Options(m));
-        if !(4..=2048).contains(&self.phi_bins) || !(4..=2048).contains(&self.theta_bins) {
+        if !(4..=2048).contains(&self.phi_bins()) || !(4..=2048).contains(&self.theta_bins()) {
             return bad(format!(
                 "hough accumulator {}x{} must have 4..=2048 cells on each side",
-                self.phi_bins, self.theta_bins
+                self.phi_bins(),
+                self.theta_bins()
             ));
         }
         if self.max_rows == 0 || self.max_rows > 256 {
@@ -91,16 +122,16 @@ impl HoughOptions {
                 self.min_peak_fraction
             ));
         }
-        if !(self.min_tolerance_deg > 0.0 && self.min_tolerance_deg < 10.0) {
+        let t = self.min_tolerance_deg();
+        if !(t > 0.0 && t < 10.0) {
             return bad(format!(
-                "hough.min_tolerance_deg = {} must be within (0, 10)",
-                self.min_tolerance_deg
+                "hough.min_tolerance_deg = {t} must be within (0, 10)"
             ));
         }
-        if !(self.merge_angle_deg >= 0.0 && self.merge_angle_deg < 45.0) {
+        let m = self.merge_angle_deg();
+        if !(0.0..45.0).contains(&m) {
             return bad(format!(
-                "hough.merge_angle_deg = {} must be within [0, 45)",
-                self.merge_angle_deg
+                "hough.merge_angle_deg = {m} must be within [0, 45)"
             ));
         }
         if !(self.max_degeneracy > 0.0 && self.max_degeneracy <= 1.0) {
@@ -209,7 +240,7 @@ fn atan2_upper(y: f32, x: f32) -> f32 {
 impl HoughRows {
     pub fn new(opts: HoughOptions) -> Result<Self, DetectError> {
         opts.validate()?;
-        let t = opts.theta_bins;
+        let t = opts.theta_bins();
         let (cos_e, sin_e) = (0..=t)
             .map(|k| {
                 let th = k as f64 * std::f64::consts::PI / t as f64;
@@ -221,10 +252,10 @@ impl HoughRows {
             cos_e,
             sin_e,
             edge: vec![0; t + 1],
-            acc: vec![0; t * opts.phi_bins],
-            diff: vec![0; t * (opts.phi_bins + 1)],
+            acc: vec![0; t * opts.phi_bins()],
+            diff: vec![0; t * (opts.phi_bins() + 1)],
             vote_stride: 1,
-            peaks: Vec::with_capacity(t * opts.phi_bins),
+            peaks: Vec::with_capacity(t * opts.phi_bins()),
             sel: Vec::new(),
             found: Vec::with_capacity(4 * opts.max_rows),
             owned: Vec::new(),
@@ -258,8 +289,8 @@ impl HoughRows {
 
     /// The normal at the centre of cell (θ column k, φ cell j).
     pub fn cell_normal(&self, k: usize, j: usize) -> Vector3<f64> {
-        let dphi = std::f64::consts::PI / self.opts.phi_bins as f64;
-        let dth = std::f64::consts::PI / self.opts.theta_bins as f64;
+        let dphi = std::f64::consts::PI / self.opts.phi_bins() as f64;
+        let dth = std::f64::consts::PI / self.opts.theta_bins() as f64;
         from_phi_theta((j as f64 + 0.5) * dphi, (k as f64 + 0.5) * dth)
     }
 
@@ -270,8 +301,8 @@ impl HoughRows {
             th -= std::f64::consts::PI;
             phi = std::f64::consts::PI - phi;
         }
-        let p = self.opts.phi_bins;
-        let t = self.opts.theta_bins;
+        let p = self.opts.phi_bins();
+        let t = self.opts.theta_bins();
         let j = ((phi / std::f64::consts::PI * p as f64) as usize).min(p - 1);
         let k = ((th / std::f64::consts::PI * t as f64) as usize).min(t - 1);
         (k, j)
@@ -286,8 +317,8 @@ impl HoughRows {
     /// whole columns).
     #[inline(never)]
     fn vote(&mut self, rays: &[[f32; 3]]) {
-        let p = self.opts.phi_bins;
-        let t = self.opts.theta_bins;
+        let p = self.opts.phi_bins();
+        let t = self.opts.theta_bins();
         let scale = p as f32 / PI32;
         let pmax = (p - 1) as f32;
         let stride = p + 1;
@@ -327,8 +358,8 @@ impl HoughRows {
     /// Neighbour of cell (k, j) at offset (dk, dj) on the wrapped accumulator.
     #[inline]
     fn neighbour(&self, k: usize, j: usize, dk: isize, dj: isize) -> usize {
-        let p = self.opts.phi_bins as isize;
-        let t = self.opts.theta_bins as isize;
+        let p = self.opts.phi_bins() as isize;
+        let t = self.opts.theta_bins() as isize;
         let mut jj = (j as isize + dj).rem_euclid(p);
         let kk = k as isize + dk;
         let kk = if kk < 0 || kk >= t {
@@ -342,8 +373,8 @@ impl HoughRows {
 
     #[inline(never)]
     fn find_peaks(&mut self) -> u32 {
-        let p = self.opts.phi_bins;
-        let t = self.opts.theta_bins;
+        let p = self.opts.phi_bins();
+        let t = self.opts.theta_bins();
         let max = self.acc.iter().copied().max().unwrap_or(0);
         let floor = (self
             .opts
@@ -388,9 +419,9 @@ impl HoughRows {
         rays: &[[f32; 3]],
         weights: &[f32],
     ) -> Option<(Row, f64)> {
-        let cell = std::f64::consts::PI / self.opts.phi_bins.min(self.opts.theta_bins) as f64;
+        let cell = std::f64::consts::PI / self.opts.phi_bins().min(self.opts.theta_bins()) as f64;
         let mut tol = 1.5 * cell;
-        let min_tol = self.opts.min_tolerance_deg.to_radians();
+        let min_tol = self.opts.min_tolerance_deg().to_radians();
         // Points within twice the first band: later bands are narrower and the normal moves
         // little, so they never need points outside this set.
         let wide = (2.0 * tol).sin();
@@ -471,7 +502,7 @@ impl HoughRows {
         }
         self.vote(rays);
         let max_votes = self.find_peaks();
-        let p = self.opts.phi_bins;
+        let p = self.opts.phi_bins();
         self.found.clear();
         let npeaks = self.peaks.len();
         for pi in 0..npeaks {
@@ -486,7 +517,7 @@ impl HoughRows {
         // Accept rows strongest first; a candidate whose points mostly belong to rows already
         // accepted (a great circle through a row's wide near part, or the same row again)
         // is not a row of its own.
-        let merge = self.opts.merge_angle_deg.to_radians();
+        let merge = self.opts.merge_angle_deg().to_radians();
         let start = rows.len();
         self.bands.clear();
         self.owned.clear();
@@ -725,7 +756,7 @@ pub(crate) mod tests {
                 let n = u * t.cos() + v * t.sin();
                 let (k, j) = h.cell_of(&n);
                 // allow the neighbouring φ cell (the curve may turn inside a column)
-                let p_ = h.opts.phi_bins;
+                let p_ = h.opts.phi_bins();
                 let hit = (-1isize..=1).any(|dj| h.acc[h.neighbour(k, j, 0, dj)] > 0)
                     || h.acc[k * p_ + j] > 0;
                 assert!(hit, "ray {p:?} normal {n:?} cell {k},{j}");
@@ -749,7 +780,7 @@ pub(crate) mod tests {
             .collect();
         let mut h = HoughRows::new(HoughOptions::default()).unwrap();
         h.vote(&rays);
-        let (p, t) = (h.opts.phi_bins, h.opts.theta_bins);
+        let (p, t) = (h.opts.phi_bins(), h.opts.theta_bins());
         let mut naive = vec![0u32; p * t];
         let cell = |phi: f32| (phi * p as f32 / PI32).min((p - 1) as f32) as usize;
         for r in &rays {
@@ -794,7 +825,7 @@ pub(crate) mod tests {
         assert!(rows.iter().all(|r| r.support < 400), "{rows:?}");
         assert!(h.find_rows(&rays, &weights[1..], &mut rows).is_err());
         assert!(HoughRows::new(HoughOptions {
-            phi_bins: 1,
+            phi_bins: Some(1),
             ..Default::default()
         })
         .is_err());

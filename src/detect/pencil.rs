@@ -63,9 +63,13 @@ pub struct PencilOptions {
     /// the vanishing point on them (see `Detector`'s pencil path).
     pub polish: bool,
     /// The polish's band around a row is a quarter of the angle to its nearest neighbour
-    /// (around the vanishing point), at most this (degrees).
-    pub polish_max_band_deg: f64,
+    /// (around the vanishing point), at most this (degrees). Default (absent): from the
+    /// calibration's field of view (3° at the GC2450C's; [`super::scale`]).
+    pub polish_max_band_deg: Option<f64>,
 }
+
+/// The polish's widest band (degrees) at the reference angular resolution.
+pub const REFERENCE_POLISH_MAX_BAND_DEG: f64 = 3.0;
 
 impl Default for PencilOptions {
     fn default() -> Self {
@@ -85,12 +89,18 @@ impl Default for PencilOptions {
             candidates: 4,
             coverage_power: 2.0,
             polish: true,
-            polish_max_band_deg: 3.0,
+            polish_max_band_deg: None,
         }
     }
 }
 
 impl PencilOptions {
+    /// The polish's widest band (degrees) in force (the option, else the reference value).
+    pub fn polish_max_band_deg(&self) -> f64 {
+        self.polish_max_band_deg
+            .unwrap_or(REFERENCE_POLISH_MAX_BAND_DEG)
+    }
+
     pub fn validate(&self) -> Result<(), DetectError> {
         let positive = [
             ("bin_px", self.bin_px),
@@ -113,10 +123,10 @@ impl PencilOptions {
                 self.reference_px, self.bin_px
             )));
         }
-        if !(self.polish_max_band_deg > 0.0 && self.polish_max_band_deg <= 30.0) {
+        let b = self.polish_max_band_deg();
+        if !(b > 0.0 && b <= 30.0) {
             return Err(DetectError::Options(format!(
-                "pencil.polish_max_band_deg = {} must be within (0, 30]",
-                self.polish_max_band_deg
+                "pencil.polish_max_band_deg = {b} must be within (0, 30]"
             )));
         }
         if !(0.0..=10.0).contains(&self.coverage_power) {

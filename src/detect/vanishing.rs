@@ -22,57 +22,85 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct VanishingOptions {
-    /// Accumulator cells along the azimuth (0..180°).
-    pub azimuth_bins: usize,
-    /// Accumulator cell height along the elevation (degrees).
-    pub elevation_bin_deg: f64,
+    /// Accumulator cells along the azimuth (0..180°). Default (absent): derived from the
+    /// calibration's field of view (180, 1° cells, at the GC2450C's; [`super::scale`]).
+    pub azimuth_bins: Option<usize>,
+    /// Accumulator cell height along the elevation (degrees). Default: from the calibration
+    /// (1° at the GC2450C's resolution).
+    pub elevation_bin_deg: Option<f64>,
     /// A row is consistent with the vanishing point when its normal is within this angle
-    /// (degrees) of the plane perpendicular to the direction.
-    pub inlier_deg: f64,
+    /// (degrees) of the plane perpendicular to the direction. Default: from the calibration
+    /// (1° at the GC2450C's resolution).
+    pub inlier_deg: Option<f64>,
     /// Rows whose normals are all within this angle (degrees) of each other do not define
-    /// a direction.
-    pub min_spread_deg: f64,
+    /// a direction. Default: from the calibration (2° at the GC2450C's resolution).
+    pub min_spread_deg: Option<f64>,
     /// Iterations of the fit / inlier update.
     pub refine_iterations: usize,
 }
 
+/// The vanishing stage's defaults at the reference angular resolution ([`super::scale`]).
+pub const REFERENCE_AZIMUTH_BINS: usize = 180;
+pub const REFERENCE_ELEVATION_BIN_DEG: f64 = 1.0;
+pub const REFERENCE_INLIER_DEG: f64 = 1.0;
+pub const REFERENCE_MIN_SPREAD_DEG: f64 = 2.0;
+
 impl Default for VanishingOptions {
     fn default() -> Self {
         VanishingOptions {
-            azimuth_bins: 180,
-            elevation_bin_deg: 1.0,
-            inlier_deg: 1.0,
-            min_spread_deg: 2.0,
+            azimuth_bins: None,
+            elevation_bin_deg: None,
+            inlier_deg: None,
+            min_spread_deg: None,
             refine_iterations: 10,
         }
     }
 }
 
 impl VanishingOptions {
+    /// Azimuth cells in force (the option, else the reference value).
+    pub fn azimuth_bins(&self) -> usize {
+        self.azimuth_bins.unwrap_or(REFERENCE_AZIMUTH_BINS)
+    }
+
+    /// Elevation cell (degrees) in force.
+    pub fn elevation_bin_deg(&self) -> f64 {
+        self.elevation_bin_deg
+            .unwrap_or(REFERENCE_ELEVATION_BIN_DEG)
+    }
+
+    /// Inlier tolerance (degrees) in force.
+    pub fn inlier_deg(&self) -> f64 {
+        self.inlier_deg.unwrap_or(REFERENCE_INLIER_DEG)
+    }
+
+    /// Smallest spread of the rows' normals (degrees) in force.
+    pub fn min_spread_deg(&self) -> f64 {
+        self.min_spread_deg.unwrap_or(REFERENCE_MIN_SPREAD_DEG)
+    }
+
     pub fn validate(&self) -> Result<(), DetectError> {
         let bad = |m: String| Err(DetectError::Options(m));
-        if !(4..=4096).contains(&self.azimuth_bins) {
+        let a = self.azimuth_bins();
+        if !(4..=4096).contains(&a) {
             return bad(format!(
-                "vanishing.azimuth_bins = {} must be within 4..=4096",
-                self.azimuth_bins
+                "vanishing.azimuth_bins = {a} must be within 4..=4096"
             ));
         }
-        if !(self.elevation_bin_deg > 0.01 && self.elevation_bin_deg <= 10.0) {
+        let e = self.elevation_bin_deg();
+        if !(e > 0.01 && e <= 10.0) {
             return bad(format!(
-                "vanishing.elevation_bin_deg = {} must be within (0.01, 10]",
-                self.elevation_bin_deg
+                "vanishing.elevation_bin_deg = {e} must be within (0.01, 10]"
             ));
         }
-        if !(self.inlier_deg > 0.0 && self.inlier_deg < 30.0) {
-            return bad(format!(
-                "vanishing.inlier_deg = {} must be within (0, 30)",
-                self.inlier_deg
-            ));
+        let i = self.inlier_deg();
+        if !(i > 0.0 && i < 30.0) {
+            return bad(format!("vanishing.inlier_deg = {i} must be within (0, 30)"));
         }
-        if !(self.min_spread_deg >= 0.0 && self.min_spread_deg < 90.0) {
+        let m = self.min_spread_deg();
+        if !(0.0..90.0).contains(&m) {
             return bad(format!(
-                "vanishing.min_spread_deg = {} must be within [0, 90)",
-                self.min_spread_deg
+                "vanishing.min_spread_deg = {m} must be within [0, 90)"
             ));
         }
         Ok(())
@@ -119,12 +147,12 @@ impl VanishingFinder {
                 "max_tilt_deg = {max_tilt_deg} must be within (0, 80]"
             )));
         }
-        let a = opts.azimuth_bins;
+        let a = opts.azimuth_bins();
         let (cos_e, sin_e) = (0..=a)
             .map(|k| (k as f64 * std::f64::consts::PI / a as f64).sin_cos())
             .map(|(s, c)| (c, s))
             .unzip();
-        let elev_bins = (2.0 * max_tilt_deg / opts.elevation_bin_deg).ceil() as usize;
+        let elev_bins = (2.0 * max_tilt_deg / opts.elevation_bin_deg()).ceil() as usize;
         Ok(VanishingFinder {
             opts,
             max_tilt: max_tilt_deg.to_radians(),
@@ -180,7 +208,7 @@ impl VanishingFinder {
             return Ok(none);
         };
         let mut v = self.robot_from_camera.inverse() * v0;
-        let s_tol = self.opts.inlier_deg.to_radians().sin();
+        let s_tol = self.opts.inlier_deg().to_radians().sin();
         let mut residual = 0.0;
         let mut inlier_weight = 0.0;
         let mut count = 0usize;
@@ -227,7 +255,7 @@ impl VanishingFinder {
                 }
             }
         }
-        if spread < self.opts.min_spread_deg.to_radians() {
+        if spread < self.opts.min_spread_deg().to_radians() {
             inliers.fill(false);
             return Ok(none);
         }
@@ -236,7 +264,7 @@ impl VanishingFinder {
             v = -v;
         }
         let quality = (inlier_weight / total_weight).clamp(0.0, 1.0)
-            * (1.0 - residual / self.opts.inlier_deg.to_radians()).clamp(0.0, 1.0)
+            * (1.0 - residual / self.opts.inlier_deg().to_radians()).clamp(0.0, 1.0)
             * (1.0 - 0.5f64.powi(count_final as i32 - 1));
         Ok(VanishingResult {
             vanishing_point: Some(VanishingPoint {
@@ -251,7 +279,7 @@ impl VanishingFinder {
     }
 
     fn vote(&mut self, weights: &[f64]) {
-        let a = self.opts.azimuth_bins;
+        let a = self.opts.azimuth_bins();
         let e = self.elev_bins;
         let tilt = self.max_tilt;
         let scale = e as f64 / (2.0 * tilt);
@@ -298,7 +326,7 @@ impl VanishingFinder {
         let e = self.elev_bins;
         let tilt = self.max_tilt;
         let (k, j) = (idx / e, idx % e);
-        let alpha = (k as f64 + 0.5) * std::f64::consts::PI / self.opts.azimuth_bins as f64;
+        let alpha = (k as f64 + 0.5) * std::f64::consts::PI / self.opts.azimuth_bins() as f64;
         let beta = -tilt + (j as f64 + 0.5) * 2.0 * tilt / e as f64;
         Some(Vector3::new(
             beta.cos() * alpha.cos(),

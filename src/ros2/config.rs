@@ -41,8 +41,13 @@ pub struct Ros2Config {
     /// Local IP addresses whose interfaces DDS may use (multicast and advertised unicast
     /// locators). Empty: all interfaces.
     pub networks: Vec<IpAddr>,
-    /// QoS of the estimate topics (`orientation`, `heading_tilt`) and of `image_raw`.
+    /// QoS of the per-frame topics (`orientation`, `heading_tilt`, the `row_*` topics) and of
+    /// `image_raw`.
     pub qos: QosConfig,
+    /// QoS of the row guidance topics (`row_pose`, `row_path`, `row_offset`,
+    /// `row_heading_error`): reliable by default, so that subscribers with ROS 2's default
+    /// QoS (reliable: row-follow controllers, Nav2) match as well as best-effort ones.
+    pub row_qos: QosConfig,
     /// Standard deviation of heading and tilt, degrees, at quality 1; it grows as 1/quality.
     pub sigma_deg_at_full_quality: f64,
     /// Frames on `<namespace>/image_raw` per second of capture time; 0 publishes no frames.
@@ -63,6 +68,10 @@ impl Default for Ros2Config {
             path_step_m: 0.5,
             networks: Vec::new(),
             qos: QosConfig::default(),
+            row_qos: QosConfig {
+                reliability: Reliability::Reliable,
+                depth: 5,
+            },
             sigma_deg_at_full_quality: 1.0,
             image_rate_hz: 0.0,
         }
@@ -154,6 +163,9 @@ impl Ros2Config {
         if self.qos.depth == 0 {
             return err("qos.depth", "must be at least 1".to_string());
         }
+        if self.row_qos.depth == 0 {
+            return err("row_qos.depth", "must be at least 1".to_string());
+        }
         let s = self.sigma_deg_at_full_quality;
         if !(s.is_finite() && s > 0.0 && s <= 180.0) {
             return err(
@@ -240,6 +252,7 @@ mod tests {
         assert_eq!(c.namespace, "/omnirow");
         assert_eq!(c.node_name, "omnirow");
         assert_eq!(c.qos.reliability, Reliability::BestEffort);
+        assert_eq!(c.row_qos.reliability, Reliability::Reliable);
         assert!(!c.enabled);
     }
 
@@ -262,6 +275,9 @@ mod tests {
             [qos]
             reliability = "reliable"
             depth = 10
+            [row_qos]
+            reliability = "best_effort"
+            depth = 3
             "#,
         )
         .unwrap();
@@ -270,6 +286,13 @@ mod tests {
         assert_eq!(c.networks.len(), 2);
         assert_eq!(c.qos.reliability, Reliability::Reliable);
         assert_eq!(c.qos.depth, 10);
+        assert_eq!(
+            c.row_qos,
+            QosConfig {
+                reliability: Reliability::BestEffort,
+                depth: 3
+            }
+        );
         assert_eq!(c.rows_frame_id, "crop_rows");
         assert_eq!((c.path_length_m, c.path_step_m), (3.0, 0.25));
     }
@@ -305,6 +328,7 @@ mod tests {
         bad(|c| c.path_length_m = f64::NAN, "path_length_m");
         bad(|c| c.path_length_m = 1000.0, "path_length_m");
         bad(|c| c.qos.depth = 0, "qos.depth");
+        bad(|c| c.row_qos.depth = 0, "row_qos.depth");
         bad(
             |c| c.sigma_deg_at_full_quality = 0.0,
             "sigma_deg_at_full_quality",

@@ -15,16 +15,16 @@
 //! | `<ns>/orientation` | `sensor_msgs/msg/Imu` | `[ros2.qos]`, sensor data by default |
 //! | `<ns>/heading_tilt` | `geometry_msgs/msg/Vector3Stamped` | `[ros2.qos]` |
 //! | `<ns>/image_raw` | `sensor_msgs/msg/Image` | `[ros2.qos]`; only if `image_rate_hz` > 0 |
-//! | `<ns>/row_pose` | `geometry_msgs/msg/PoseWithCovarianceStamped` | `[ros2.qos]` |
-//! | `<ns>/row_path` | `nav_msgs/msg/Path` | `[ros2.qos]` |
-//! | `<ns>/row_offset` | `std_msgs/msg/Float32` | `[ros2.qos]` |
-//! | `<ns>/row_heading_error` | `std_msgs/msg/Float32` | `[ros2.qos]` |
+//! | `<ns>/row_pose` | `geometry_msgs/msg/PoseWithCovarianceStamped` | `[ros2.row_qos]`, reliable by default |
+//! | `<ns>/row_path` | `nav_msgs/msg/Path` | `[ros2.row_qos]` |
+//! | `<ns>/row_offset` | `std_msgs/msg/Float32` | `[ros2.row_qos]` |
+//! | `<ns>/row_heading_error` | `std_msgs/msg/Float32` | `[ros2.row_qos]` |
 //! | `/diagnostics` | `diagnostic_msgs/msg/DiagnosticArray` | reliable, keep last 10 |
 //!
 //! The `row_*` topics carry the row guidance's tracked estimate; a frame without one (guidance
 //! lost or disabled) publishes nothing on them.
 
-use super::config::{Reliability, Ros2Config};
+use super::config::{QosConfig, Reliability, Ros2Config};
 use super::convert::{ImageThrottle, MessageBuilder};
 use super::error::Ros2Error;
 use super::input::{RosEstimate, RosGuidance, RosStatus};
@@ -139,7 +139,8 @@ impl Ros2Publisher {
             .map_err(|e| format!("{e:?}"))
             .map_err(create_err("ROS 2 node"))?;
 
-        let frame_qos = frame_qos(config);
+        let frame_qos = qos_profile(&config.qos);
+        let row_qos = qos_profile(&config.row_qos);
         // rclcpp's default QoS, which diagnostic_aggregator and `ros2 topic echo` request.
         let diagnostics_qos = QosProfile::publisher_default()
             .reliability_reliable(WhenFull::Fail)
@@ -149,10 +150,10 @@ impl Ros2Publisher {
         let ns = config.namespace.as_str();
         let orientation = writer::<Imu>(&mut node, ns, "orientation", &frame_qos)?;
         let heading_tilt = writer::<Vector3Stamped>(&mut node, ns, "heading_tilt", &frame_qos)?;
-        let row_pose = writer::<PoseWithCovarianceStamped>(&mut node, ns, "row_pose", &frame_qos)?;
-        let row_path = writer::<Path>(&mut node, ns, "row_path", &frame_qos)?;
-        let row_offset = writer::<Float32>(&mut node, ns, "row_offset", &frame_qos)?;
-        let row_heading_error = writer::<Float32>(&mut node, ns, "row_heading_error", &frame_qos)?;
+        let row_pose = writer::<PoseWithCovarianceStamped>(&mut node, ns, "row_pose", &row_qos)?;
+        let row_path = writer::<Path>(&mut node, ns, "row_path", &row_qos)?;
+        let row_offset = writer::<Float32>(&mut node, ns, "row_offset", &row_qos)?;
+        let row_heading_error = writer::<Float32>(&mut node, ns, "row_heading_error", &row_qos)?;
         let diagnostics =
             writer::<DiagnosticArray>(&mut node, "/", "diagnostics", &diagnostics_qos)?;
         let image = if config.image_rate_hz > 0.0 {
@@ -308,14 +309,14 @@ impl Ros2Publisher {
     }
 }
 
-/// The QoS of the per-frame topics from `[ros2.qos]`.
-fn frame_qos(config: &Ros2Config) -> QosProfile {
+/// The QoS of per-frame topics from `[ros2.qos]` or `[ros2.row_qos]`.
+fn qos_profile(qos: &QosConfig) -> QosProfile {
     let base = QosProfile::subscription_default()
         .durability(Durability::Volatile)
         .history(History::KeepLast {
-            depth: config.qos.depth as usize,
+            depth: qos.depth as usize,
         });
-    match config.qos.reliability {
+    match qos.reliability {
         Reliability::BestEffort => base.reliability_best_effort(),
         Reliability::Reliable => base.reliability_reliable(WhenFull::Fail),
     }
@@ -383,14 +384,19 @@ mod tests {
     }
 
     #[test]
-    fn frame_qos_follows_the_config() {
+    fn qos_follows_the_config() {
         let mut c = Ros2Config::default();
-        let q = frame_qos(&c);
+        let q = qos_profile(&c.qos);
         assert_eq!(q.reliability, ros2_client::qos::Reliability::BestEffort);
         assert_eq!(q.history, History::KeepLast { depth: 5 });
+        // The row topics: reliable by default, serving default-QoS subscribers.
+        assert!(matches!(
+            qos_profile(&c.row_qos).reliability,
+            ros2_client::qos::Reliability::Reliable { .. }
+        ));
         c.qos.reliability = Reliability::Reliable;
         c.qos.depth = 2;
-        let q = frame_qos(&c);
+        let q = qos_profile(&c.qos);
         assert!(matches!(
             q.reliability,
             ros2_client::qos::Reliability::Reliable { .. }

@@ -23,8 +23,10 @@ use super::split::Section;
 pub struct MergeOptions {
     /// Sections whose normals are closer than this angle (radians) may describe the same
     /// row. Default 0.005: the two boundaries of a distant row are only a few hundredths of
-    /// a radian apart, and merging them mixes two lines into one biased normal.
-    pub max_angle_rad: f64,
+    /// a radian apart, and merging them mixes two lines into one biased normal. Absent:
+    /// derived from the calibration's field of view (0.005 at the GC2450C's;
+    /// [`crate::detect::scale`]).
+    pub max_angle_rad: Option<f64>,
     /// The merged great circle must fit all points with an RMS distance within this many
     /// pixels (converted with the calibration's angular pixel size). Default 1.5.
     pub max_residual_px: f64,
@@ -32,10 +34,20 @@ pub struct MergeOptions {
     pub min_support: u32,
 }
 
+/// The merge angle (radians) at the reference angular resolution.
+pub const REFERENCE_MAX_ANGLE_RAD: f64 = 0.005;
+
+impl MergeOptions {
+    /// The merge angle (radians) in force (the option, else the reference value).
+    pub fn max_angle_rad(&self) -> f64 {
+        self.max_angle_rad.unwrap_or(REFERENCE_MAX_ANGLE_RAD)
+    }
+}
+
 impl Default for MergeOptions {
     fn default() -> Self {
         MergeOptions {
-            max_angle_rad: 0.005,
+            max_angle_rad: None,
             max_residual_px: 1.5,
             min_support: 30,
         }
@@ -79,10 +91,11 @@ pub struct Merger {
 impl Merger {
     /// `pixel_angle_rad` is the angle one pixel subtends (to read `max_residual_px`).
     pub fn new(options: MergeOptions, pixel_angle_rad: f64) -> Result<Self, EdgeError> {
-        if !(options.max_angle_rad >= 0.0 && options.max_angle_rad < std::f64::consts::FRAC_PI_2) {
+        let max_angle = options.max_angle_rad();
+        if !(0.0..std::f64::consts::FRAC_PI_2).contains(&max_angle) {
             return Err(EdgeError::Options(format!(
                 "merge: max_angle_rad = {} must be in [0, pi/2)",
-                options.max_angle_rad
+                max_angle
             )));
         }
         if !(options.max_residual_px > 0.0 && options.max_residual_px.is_finite()) {
@@ -99,7 +112,7 @@ impl Merger {
         let r = (options.max_residual_px * pixel_angle_rad).sin();
         Ok(Merger {
             options,
-            cos_angle: options.max_angle_rad.cos(),
+            cos_angle: max_angle.cos(),
             max_mean_sq: r * r,
             order: Vec::new(),
             clusters: Vec::new(),
@@ -256,7 +269,7 @@ mod tests {
     fn merger(max_angle_rad: f64) -> Merger {
         Merger::new(
             MergeOptions {
-                max_angle_rad,
+                max_angle_rad: Some(max_angle_rad),
                 max_residual_px: 1.5,
                 min_support: 0,
             },
@@ -326,7 +339,7 @@ mod tests {
                 let n = (c * off.cos() + (u * dir.cos() + v * dir.sin()) * off.sin()).normalize();
                 section_on(&n, 0.0, 30, 30 * k as u32)
             }).collect();
-            let mut m = Merger::new(MergeOptions { max_angle_rad: thr, max_residual_px: 1e6, min_support: 0 }, 0.0016).unwrap();
+            let mut m = Merger::new(MergeOptions { max_angle_rad: Some(thr), max_residual_px: 1e6, min_support: 0 }, 0.0016).unwrap();
             let mut rows = Vec::new();
             m.merge(&secs, &mut rows).unwrap();
             let a = m.assignment();
