@@ -15,6 +15,12 @@ use node::*;
 fn drive(name: &str, frames: u32, extra: &str) -> Vec<Estimate> {
     let dir = tmpdir(name);
     let cfg = small_config(&dir, extra);
+    run_config(&cfg, frames)
+}
+
+/// Runs `omnirow run` on the configuration `cfg` for `frames` frames; the estimates it sent
+/// over UDP, one per frame.
+fn run_config(cfg: &std::path::Path, frames: u32) -> Vec<Estimate> {
     let (sock, addr) = udp();
     let mut child = bin()
         .args([
@@ -26,7 +32,7 @@ fn drive(name: &str, frames: u32, extra: &str) -> Vec<Estimate> {
         ])
         .arg(&addr)
         .arg("--config")
-        .arg(&cfg)
+        .arg(cfg)
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
@@ -241,25 +247,7 @@ fn drive_with(name: &str, frames: u32, keys: &str) -> Vec<Estimate> {
         format!("[source.synthetic]\nwidth = 408\nheight = 342\nfps = 10.0\nseed = 5\n{keys}\n[http]\nenabled = false\n"),
     )
     .unwrap();
-    let (sock, addr) = udp();
-    let mut child = bin()
-        .args([
-            "run",
-            "--frames",
-            &frames.to_string(),
-            "--no-print",
-            "--udp",
-        ])
-        .arg(&addr)
-        .arg("--config")
-        .arg(&cfg)
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let est = collect(&sock, &mut child, Duration::from_secs(120));
-    assert!(child.wait_with_output().unwrap().status.success());
-    assert_eq!(est.len(), frames as usize);
-    est
+    run_config(&cfg, frames)
 }
 
 #[test]
