@@ -15,12 +15,12 @@ use node::*;
 fn drive(name: &str, frames: u32, extra: &str) -> Vec<Estimate> {
     let dir = tmpdir(name);
     let cfg = small_config(&dir, extra);
-    run_config(&cfg, frames)
+    run_config(&cfg, frames, Duration::from_secs(120))
 }
 
 /// Runs `omnirow run` on the configuration `cfg` for `frames` frames; the estimates it sent
 /// over UDP, one per frame.
-fn run_config(cfg: &std::path::Path, frames: u32) -> Vec<Estimate> {
+fn run_config(cfg: &std::path::Path, frames: u32, timeout: Duration) -> Vec<Estimate> {
     let (sock, addr) = udp();
     let mut child = bin()
         .args([
@@ -36,7 +36,7 @@ fn run_config(cfg: &std::path::Path, frames: u32) -> Vec<Estimate> {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    let est = collect(&sock, &mut child, Duration::from_secs(120));
+    let est = collect(&sock, &mut child, timeout);
     assert!(child.wait_with_output().unwrap().status.success());
     assert_eq!(est.len(), frames as usize);
     est
@@ -91,18 +91,7 @@ fn curvature_of_a_curved_drive_matches_its_radius() {
         "[source.synthetic]\nwidth = 408\nheight = 342\nfps = 30.0\nseed = 5\ncurvature_per_m = 0.05\n\n[http]\nenabled = false\n",
     )
     .unwrap();
-    let (sock, addr) = udp();
-    let mut child = bin()
-        .args(["run", "--frames", "30", "--no-print", "--udp"])
-        .arg(&addr)
-        .arg("--config")
-        .arg(&cfg)
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let est = collect(&sock, &mut child, Duration::from_secs(120));
-    assert!(child.wait_with_output().unwrap().status.success());
-    assert_eq!(est.len(), 30);
+    let est = run_config(&cfg, 30, Duration::from_secs(120));
     for e in &est {
         let g = e.guidance.as_ref().unwrap();
         let t = e.truth.as_ref().unwrap();
@@ -199,18 +188,7 @@ fn crossing_to_the_next_path_is_followed_without_a_jump() {
         "[source.synthetic]\nwidth = 408\nheight = 342\nfps = 30.0\nseed = 5\ncross_at_s = 1.0\n\n[http]\nenabled = false\n",
     )
     .unwrap();
-    let (sock, addr) = udp();
-    let mut child = bin()
-        .args(["run", "--frames", "180", "--no-print", "--udp"])
-        .arg(&addr)
-        .arg("--config")
-        .arg(&cfg)
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let est = collect(&sock, &mut child, Duration::from_secs(180));
-    assert!(child.wait_with_output().unwrap().status.success());
-    assert_eq!(est.len(), 180);
+    let est = run_config(&cfg, 180, Duration::from_secs(180));
     let mut last: Option<f64> = None;
     let mut worst = 0.0f64;
     for e in &est {
@@ -247,7 +225,7 @@ fn drive_with(name: &str, frames: u32, keys: &str) -> Vec<Estimate> {
         format!("[source.synthetic]\nwidth = 408\nheight = 342\nfps = 10.0\nseed = 5\n{keys}\n[http]\nenabled = false\n"),
     )
     .unwrap();
-    run_config(&cfg, frames)
+    run_config(&cfg, frames, Duration::from_secs(120))
 }
 
 #[test]
