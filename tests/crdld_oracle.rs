@@ -35,6 +35,17 @@ fn line_normal(cal: &Calibration, l: &ScanCurve, frac_lo: f64) -> Vector3<f64> {
     r0.cross(&r1).normalize()
 }
 
+/// The labelled rows of CRDLD image `name` (512 × 512).
+fn load_labels(d: &Path, name: &str) -> Vec<ScanCurve> {
+    labels::load(
+        &d.join(format!("label/{name}.jpg")),
+        512,
+        512,
+        &Default::default(),
+    )
+    .unwrap()
+}
+
 #[test]
 #[ignore]
 fn oracle_and_classes() {
@@ -56,13 +67,7 @@ fn oracle_and_classes() {
         // frac: the fit starts this far down the row (0 = the whole row, 0.5 = its near half).
         let (mut lab, mut found, mut inside, mut sc, mut ns) = (0, 0, 0, 0.0, 0);
         for i in 0..500 {
-            let l = labels::load(
-                &d.join(format!("label/{i}.jpg")),
-                512,
-                512,
-                &Default::default(),
-            )
-            .unwrap();
+            let l = load_labels(&d, &i.to_string());
             let rows: Vec<ProjectedRow> = l
                 .iter()
                 .map(|c| ProjectedRow::project(&cal, &line_normal(&cal, c, frac)))
@@ -94,13 +99,7 @@ fn oracle_and_classes() {
         let v: serde_json::Value = serde_json::from_str(line).unwrap();
         let img = v["image"].as_str().unwrap();
         let name = Path::new(img).file_stem().unwrap().to_str().unwrap();
-        let l = labels::load(
-            &d.join(format!("label/{name}.jpg")),
-            512,
-            512,
-            &Default::default(),
-        )
-        .unwrap();
+        let l = load_labels(&d, name);
         let rows: Vec<ProjectedRow> = v["rows"]
             .as_array()
             .unwrap()
