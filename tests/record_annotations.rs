@@ -8,7 +8,7 @@
 mod node;
 
 use nalgebra::Vector3;
-use node::{bin, small_config, tmpdir};
+use node::{bin, first_file, run_ok, small_config, tmpdir};
 use omnirow::camera::Calibration;
 use omnirow::estimate::Estimate;
 use omnirow::guidance::followed::followed_lines;
@@ -19,24 +19,14 @@ use std::path::{Path, PathBuf};
 fn record(dir: &Path, extra: &str, frames: u32) -> PathBuf {
     let cfg = small_config(dir, extra);
     let rec = dir.join("rec");
-    let out = bin()
-        .args(["record", "--out"])
-        .arg(&rec)
-        .args(["--no-print", "--frames", &frames.to_string(), "--config"])
-        .arg(&cfg)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    run_ok(
+        bin()
+            .args(["record", "--out"])
+            .arg(&rec)
+            .args(["--no-print", "--frames", &frames.to_string(), "--config"])
+            .arg(&cfg),
     );
-    std::fs::read_dir(&rec)
-        .unwrap()
-        .next()
-        .unwrap()
-        .unwrap()
-        .path()
+    first_file(&rec)
 }
 
 /// Pixel (Foxglove x, y) back to a unit ray in the camera frame.
@@ -206,24 +196,14 @@ fn annotations_draw_each_estimate_where_it_lies() {
     );
 
     // The recording with annotations checks clean and replays.
-    let out = bin()
-        .args(["recording", "check"])
-        .arg(&file)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stdout)
+    run_ok(bin().args(["recording", "check"]).arg(&file));
+    let out = run_ok(
+        bin()
+            .args(["run", "--replay"])
+            .arg(&file)
+            .args(["--rate", "max", "--print", "--config"])
+            .arg(dir.join("omnirow.toml")),
     );
-    let out = bin()
-        .args(["run", "--replay"])
-        .arg(&file)
-        .args(["--rate", "max", "--print", "--config"])
-        .arg(dir.join("omnirow.toml"))
-        .output()
-        .unwrap();
-    assert!(out.status.success());
     assert_eq!(String::from_utf8_lossy(&out.stdout).lines().count(), 8);
 }
 
