@@ -15,6 +15,7 @@ pub mod pencil;
 pub mod pose;
 pub mod refit;
 pub mod scale;
+pub mod sections;
 pub mod smooth;
 pub mod threshold;
 pub mod vanishing;

@@ -9,6 +9,7 @@
 //! visited by tiles: a tile is scanned only when its cone of rays meets the row's band.
 
 use super::hough::fast_atan2;
+use super::sections::Sections;
 use super::{DetectError, Row};
 use crate::camera::OcamModel;
 use crate::sphere::{any_perpendicular, canonical, Scatter};
@@ -53,6 +54,20 @@ pub struct RefitOptions {
     /// towards the vanishing point and how wide and long its edges are, not on its number
     /// of thresholded points.
     pub precision_weights: bool,
+    /// Fit each row's centre line to its cross-sections, weighted by a variance model of
+    /// noise and plant structure estimated per row ([`super::sections`]), instead of to the
+    /// pixels by their mass: leaf clusters whose centre wanders off the stem near the camera,
+    /// where a row is widest, then no longer decide the row.
+    pub sections: bool,
+    /// Cross-sections around the whole great circle (8..=1024).
+    pub section_bins: usize,
+    /// Cross-sections farther than this many of their σ from the line lose weight (Huber);
+    /// 0: none.
+    pub section_huber: f64,
+    /// The plant-structure term of a cross-section's variance grows as its width to this
+    /// power (2: the centre wanders by a share of the width; higher: also the correlation of
+    /// neighbouring sections within one wide plant).
+    pub section_power: f64,
 }
 
 impl Default for RefitOptions {
@@ -67,6 +82,10 @@ impl Default for RefitOptions {
             wedge: true,
             plateau_cap: 0.6,
             precision_weights: true,
+            sections: true,
+            section_bins: 256,
+            section_huber: 1.5,
+            section_power: 4.0,
         }
     }
 }
@@ -79,19 +98,29 @@ impl RefitOptions {
                 self.background_fraction
             )));
         }
-        if !(self.margin_px.is_finite() && (0.0..=50.0).contains(&self.margin_px)) {
+        within("margin_px", self.margin_px, 0.0, 50.0)?;
+        within("plateau_cap", self.plateau_cap, 0.0, 10.0)?;
+        if !(8..=super::sections::MAX_SECTIONS).contains(&self.section_bins) {
             return Err(DetectError::Options(format!(
-                "refit.margin_px = {} must be within 0..=50",
-                self.margin_px
+                "refit.section_bins = {} must be within 8..={}",
+                self.section_bins,
+                super::sections::MAX_SECTIONS
             )));
         }
-        if !(self.plateau_cap.is_finite() && (0.0..=10.0).contains(&self.plateau_cap)) {
-            return Err(DetectError::Options(format!(
-                "refit.plateau_cap = {} must be within 0..=10",
-                self.plateau_cap
-            )));
-        }
+        within("section_huber", self.section_huber, 0.0, 100.0)?;
+        within("section_power", self.section_power, 0.0, 8.0)?;
         Ok(())
+    }
+}
+
+/// Checks that the refit option `name` is finite and within `lo..=hi`.
+fn within(name: &str, value: f64, lo: f64, hi: f64) -> Result<(), DetectError> {
+    if value.is_finite() && (lo..=hi).contains(&value) {
+        Ok(())
+    } else {
+        Err(DetectError::Options(format!(
+            "refit.{name} = {value} must be within {lo}..={hi}"
+        )))
     }
 }
 
@@ -330,6 +359,15 @@ pub fn refit_rows(
             // the fit: for the variance of the normal (only without the perspective model).
             let track = vp.is_some() && basis.is_none();
             let mut noise = [0f64; 6];
+            let mut sections =
+                (opts.sections && basis.is_none()).then(|| Sections::new(&n, opts.section_bins));
+            let (f1, f2) = sections.as_ref().map_or(([0f32; 3], [0f32; 3]), |s| {
+                let (a, b) = s.frame();
+                (
+                    [a.x as f32, a.y as f32, a.z as f32],
+                    [b.x as f32, b.y as f32, b.z as f32],
+                )
+            });
             for &i in candidates.iter() {
                 let i = i as usize;
                 let p = img.rays[i];
@@ -352,6 +390,13 @@ pub fn refit_rows(
                     atb += w * phi * -n.dot(&pv);
                 } else {
                     sc.add(&pv, w);
+                    if let Some(sec) = sections.as_mut() {
+                        let along = fast_atan2(
+                            f2[0] * p[0] + f2[1] * p[1] + f2[2] * p[2],
+                            f1[0] * p[0] + f1[1] * p[1] + f1[2] * p[2],
+                        );
+                        sec.add(along, nf[0] * p[0] + nf[1] * p[1] + nf[2] * p[2], w);
+                    }
                     if track && img.values[i] < cap {
                         let k = (img.solid[i] as f64 * d as f64).powi(2);
                         let (x, y, z) = (pv.x, pv.y, pv.z);
@@ -382,7 +427,15 @@ pub fn refit_rows(
                 Some(f) if f.degeneracy < 0.5 => {
                     n = f.normal;
                     ok = true;
-                    if let (true, Some(v)) = (track, vp) {
+                    if let Some(sf) = sections
+                        .as_mut()
+                        .and_then(|s| s.fit(&f.normal, vp, opts.section_huber, opts.section_power))
+                    {
+                        n = canonical(&sf.normal);
+                        if track {
+                            *along_var.last_mut().expect("pushed") = sf.along_var;
+                        }
+                    } else if let (true, Some(v)) = (track, vp) {
                         let m = nalgebra::Matrix3::new(
                             noise[0], noise[1], noise[2], noise[1], noise[3], noise[4], noise[2],
                             noise[4], noise[5],
