@@ -178,6 +178,7 @@ fn variance_model(centres: &[Centre], n: &Vector3<f64>) -> Option<(f64, f64)> {
     }
     // Start from noise alone: a / mass with the mean squared residual.
     let mean_inv_m = centres.iter().map(|c| 1.0 / c.mass).sum::<f64>() / centres.len() as f64;
+    let mean_v = centres.iter().map(|c| c.spread).sum::<f64>() / centres.len() as f64;
     let (mut a, mut b) = (mean_r2 / mean_inv_m, 0.0);
     for _ in 0..3 {
         let mut ata = Matrix2::<f64>::zeros();
@@ -199,7 +200,14 @@ fn variance_model(centres: &[Centre], n: &Vector3<f64>) -> Option<(f64, f64)> {
             .map(|inv| inv * nalgebra::Vector2::new(y0, y1));
         let (na, nb) = match sol {
             Some(x) if x[0] > 0.0 && x[1] >= 0.0 => (x[0], x[1]),
-            // A coefficient below zero: the other term alone.
+            // The noise term below zero (sections as sharp as their mass allows): the
+            // structure alone, with a noise floor a thousandth of it on average so that no
+            // section's variance is zero.
+            Some(x) if x[1] > 0.0 && ata[(1, 1)] > 0.0 => {
+                let b_only = y1 / ata[(1, 1)];
+                (b_only * mean_v / mean_inv_m * 1e-3, b_only)
+            }
+            // The structure term below zero: the noise alone.
             _ => {
                 let a_only = y0 / ata[(0, 0)];
                 (a_only.max(f64::MIN_POSITIVE), 0.0)
@@ -273,6 +281,23 @@ mod tests {
             }
         }
         sc.fit().unwrap().normal
+    }
+
+    #[test]
+    fn wide_wandering_sections_lose_weight() {
+        let truth = Vector3::new(0.1, 1.0, 0.2).normalize();
+        let vp = truth.cross(&Vector3::z()).normalize();
+        let (mut plain, mut weighted) = (0.0, 0.0);
+        for seed in 0..20 {
+            let mut s = row(&truth, 0.3, seed);
+            let p = mass_weighted(&s, &truth);
+            plain += axis_angle(&p, &truth).powi(2);
+            let f = s.fit(&p, Some(&vp), 2.5, 2.0).unwrap();
+            assert!(f.along_var.is_finite() && f.along_var > 0.0, "{f:?}");
+            assert!(f.structure > 1.0, "{f:?}");
+            weighted += axis_angle(&f.normal, &truth).powi(2);
+        }
+        assert!(weighted < 0.5 * plain, "{weighted} vs {plain}");
     }
 
     #[test]
