@@ -275,6 +275,7 @@ pub fn run(args: RunArgs, record_to: Option<PathBuf>) -> anyhow::Result<ExitCode
     };
     if let Some(rec) = cfg.record.as_mut() {
         rec.calibration_toml = Some(cal.to_toml());
+        rec.annotate = Some(cal.clone());
     }
     if let Some(g) = cfg.guidance {
         cfg.pipeline.guidance =
