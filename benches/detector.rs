@@ -1,5 +1,8 @@
 //! Detector speed on a full GC2450C frame (2448×2050), greyscale and Bayer input: each stage
-//! and the whole Hough path. Run: `cargo bench --bench detector`. Prints the breakdown.
+//! and the whole Hough path, also narrowed by a prior on the vanishing point (issue 14); and
+//! on a 640×480 perspective frame (issue 13: the cost scales with the image), the default
+//! detector and the Hough method, each with and without the prior.
+//! Run: `cargo bench --bench detector`. Prints the breakdown.
 
 #[path = "../tests/common/mod.rs"]
 mod common;
@@ -11,7 +14,9 @@ use omnirow::detect::mask::build_mask;
 use omnirow::detect::smooth::Gaussian;
 use omnirow::detect::threshold::keep_brightest;
 use omnirow::detect::vegetation::vegetation_image;
-use omnirow::detect::{Detection, Detector, DetectorOptions, GreyImage, Method, Points};
+use omnirow::detect::{
+    Detection, Detector, DetectorOptions, DetectorPrior, GreyImage, Method, Points, PriorOutcome,
+};
 use omnirow::frame::{ImageView, PixelFormat};
 use std::time::Duration;
 
@@ -55,6 +60,17 @@ fn bench(c: &mut Criterion) {
         det.process(&view, &mut out).unwrap();
         g.bench_function("whole", |b| {
             b.iter(|| det.process(&view, &mut out).unwrap())
+        });
+        // Narrowed by the tracker's kind of prior: the last vanishing point, a 2° window.
+        let prior = narrow_prior(&out);
+        det.process_with_prior(&view, Some(&prior), &mut out)
+            .unwrap();
+        assert_eq!(det.last_prior(), PriorOutcome::Accepted);
+        g.bench_function("whole_narrowed", |b| {
+            b.iter(|| {
+                det.process_with_prior(&view, Some(&prior), &mut out)
+                    .unwrap()
+            })
         });
         // Stages on the same buffers.
         let mut veg = GreyImage::default();
@@ -196,6 +212,79 @@ fn bench(c: &mut Criterion) {
     }
 }
 
+/// The prior the pipeline hands the detector while tracking: the last vanishing point in a
+/// window of 2° (`pipeline.narrow_min_window_deg`).
+fn narrow_prior(last: &Detection) -> DetectorPrior {
+    DetectorPrior {
+        vanishing_point: last.vanishing_point.expect("rows found").direction,
+        window_rad: 2f64.to_radians(),
+    }
+}
+
+/// A 640×480 perspective camera (f = 375 px, 35° below the horizon) and a colour field
+/// through it.
+fn small_frame() -> (omnirow::camera::Calibration, Vec<u8>) {
+    use omnirow::synth::{Renderer, Scene, Style, SynthOptions};
+    let toml = "[pinhole]\nwidth = 640\nheight = 480\nfx = 375.0\nfy = 375.0\ncx = 319.5\n\
+                cy = 239.5\n\n[mounting]\npitch_deg = -55.0\n";
+    let cal =
+        omnirow::camera::Calibration::parse_toml(toml, std::path::Path::new("640.toml")).unwrap();
+    let opts = SynthOptions {
+        style: Style::Colour,
+        yaw_deg: 4.0,
+        lateral_m: 0.1,
+        height_m: 1.0,
+        ..Default::default()
+    };
+    let scene = Scene::new(&opts, 3, &cal.mounting).unwrap();
+    let mut r = Renderer::new(&cal).unwrap();
+    let mut data = vec![0u8; r.buffer_len(Style::Colour)];
+    r.render_into(&scene, &mut data).unwrap();
+    (cal, data)
+}
+
+/// The default detector (combined) and the Hough method on a 640×480 RGB frame, each with
+/// and without the prior; prints each one's thread CPU time per frame.
+fn bench_small(c: &mut Criterion) {
+    let (cal, data) = small_frame();
+    let view = ImageView::new(640, 480, PixelFormat::Rgb8, &data).unwrap();
+    let mut g = c.benchmark_group("detector_640x480");
+    g.sample_size(20).measurement_time(Duration::from_secs(3));
+    for method in [Method::Combined, Method::Hough] {
+        let opts = DetectorOptions {
+            method,
+            ..Default::default()
+        };
+        let mut det = Detector::new(&cal, opts).unwrap();
+        let mut out = Detection::default();
+        det.process(&view, &mut out).unwrap();
+        let prior = narrow_prior(&out);
+        let name = method.name();
+        g.bench_function(name, |b| b.iter(|| det.process(&view, &mut out).unwrap()));
+        g.bench_function(format!("{name}_narrowed"), |b| {
+            b.iter(|| {
+                det.process_with_prior(&view, Some(&prior), &mut out)
+                    .unwrap()
+            })
+        });
+        for (label, p) in [("full", None), ("narrowed", Some(&prior))] {
+            let a = thread_cpu_ns();
+            for _ in 0..30 {
+                det.process_with_prior(&view, p, &mut out).unwrap();
+            }
+            if let (Some(a), Some(b)) = (a, thread_cpu_ns()) {
+                println!(
+                    "640x480 {name} {label}: {:.2} ms CPU per frame ({:?}, {} rows)",
+                    (b - a) as f64 / 30.0 / 1e6,
+                    det.last_prior(),
+                    out.rows.len()
+                );
+            }
+        }
+    }
+    g.finish();
+}
+
 /// CPU time of the calling thread, nanoseconds (Linux).
 fn thread_cpu_ns() -> Option<u64> {
     std::fs::read_to_string("/proc/thread-self/schedstat")
@@ -206,5 +295,5 @@ fn thread_cpu_ns() -> Option<u64> {
         .ok()
 }
 
-criterion_group!(benches, bench);
+criterion_group!(benches, bench_small, bench);
 criterion_main!(benches);

@@ -20,8 +20,9 @@
 //! alive at once, whatever the input rate — for the GC2450C (5 MB a frame) with the defaults
 //! (2, 2, 4) that is 13 frames, 65 MB.
 
+use crate::camera::Mounting;
 use crate::check::{Check, Raw};
-use crate::detect::Detection;
+use crate::detect::{Detection, DetectorPrior};
 use crate::estimate::{Estimate, Status};
 use crate::frame::{now_ns, Frame, ImageView};
 use crate::gige::Recycler;
@@ -45,6 +46,17 @@ pub trait Processor: Send {
         view: &ImageView,
         out: &mut Detection,
     ) -> Result<(), Box<dyn std::error::Error + Send + Sync>>;
+
+    /// As [`Processor::process`], narrowed by a prior on the vanishing point (the tracker's
+    /// prediction, [`NarrowSearch`]); the default ignores it.
+    fn process_with_prior(
+        &mut self,
+        view: &ImageView,
+        _prior: Option<&DetectorPrior>,
+        out: &mut Detection,
+    ) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
+        self.process(view, out)
+    }
 
     /// The rows' curvature from the points of the image just processed into `det`, for row
     /// guidance (a detector with a [`crate::guidance::RowFit`]); `None` by default.
@@ -74,6 +86,46 @@ pub struct PipelineOptions {
     pub poll_timeout: Duration,
     /// Row guidance, run by the publisher on each estimate in frame order.
     pub guidance: Option<Guidance>,
+    /// With row guidance: the tracker's prediction narrows the next frames' search.
+    pub narrow_search: Option<NarrowSearch>,
+}
+
+/// How the tracker's prediction becomes the detector's prior (issue 14 §2): the vanishing
+/// point of the predicted heading and the last frame's tilt, in a window of `sigmas` times
+/// the heading's standard deviation, at least `min_window_rad` (the tilt is not tracked
+/// and moves with the ground). While the tracker is lost there is no prior.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NarrowSearch {
+    pub mounting: Mounting,
+    pub min_window_rad: f64,
+    pub sigmas: f64,
+}
+
+impl NarrowSearch {
+    /// The defaults (`[pipeline]`): a window of 4 σ of the heading, at least 2°.
+    pub fn new(mounting: Mounting) -> Self {
+        NarrowSearch {
+            mounting,
+            min_window_rad: 2f64.to_radians(),
+            sigmas: 4.0,
+        }
+    }
+
+    /// The prior for the frames after `est` (guidance applied), or `None`. `tilt_rad`: the
+    /// last tilt the detector measured.
+    pub fn prior(&self, est: &Estimate, tilt_rad: f64) -> Option<DetectorPrior> {
+        let g = est.guidance.as_ref()?;
+        if !g.tracking.has_estimate() {
+            return None;
+        }
+        let heading = g.heading_rad?;
+        let sd = g.covariance?[1][1].max(0.0).sqrt();
+        let window = (self.sigmas * sd)
+            .max(self.min_window_rad)
+            .min(crate::detect::prior::MAX_WINDOW_RAD);
+        (heading.is_finite() && window.is_finite())
+            .then(|| DetectorPrior::from_heading_tilt(heading, tilt_rad, window, &self.mounting))
+    }
 }
 
 impl Default for PipelineOptions {
@@ -88,6 +140,7 @@ impl Default for PipelineOptions {
             status_interval: Duration::from_secs(1),
             poll_timeout: Duration::from_millis(50),
             guidance: None,
+            narrow_search: None,
         }
     }
 }
@@ -101,6 +154,9 @@ pub(crate) struct RawPipeline {
     record_queue: Raw<i64>,
     workers: Raw<i64>,
     min_quality: Raw<f64>,
+    narrow_search: Raw<bool>,
+    narrow_min_window_deg: Raw<f64>,
+    narrow_sigmas: Raw<f64>,
 }
 
 impl RawPipeline {
@@ -129,6 +185,28 @@ impl RawPipeline {
             min_quality: c.range("pipeline.min_quality", &self.min_quality, 0.3, 0.0, 1.0),
             status_interval: Duration::from_secs_f64(status_interval_s),
             ..PipelineOptions::default()
+        };
+        let min_window_deg = c.range(
+            "pipeline.narrow_min_window_deg",
+            &self.narrow_min_window_deg,
+            2.0,
+            0.1,
+            30.0,
+        );
+        let sigmas = c.range(
+            "pipeline.narrow_sigmas",
+            &self.narrow_sigmas,
+            4.0,
+            1.0,
+            100.0,
+        );
+        let options = PipelineOptions {
+            narrow_search: c.get(&self.narrow_search, true).then_some(NarrowSearch {
+                min_window_rad: min_window_deg.to_radians(),
+                sigmas,
+                ..NarrowSearch::new(Mounting::default())
+            }),
+            ..options
         };
         (options, workers as usize)
     }
@@ -307,13 +385,16 @@ impl Pipeline {
             run_source(hb, source, &limits, frames, to_record, rel)
         })?;
 
-        // Frame queue → detector workers (a ticket per frame) → estimate queue.
+        // Frame queue → detector workers (a ticket per frame) → estimate queue. The publisher
+        // leaves the tracker's prediction in `prior` for the workers' next frames.
+        let prior: PriorSlot = Arc::new(Mutex::new(None));
         let workers = processors.len();
         for (i, proc) in processors.into_iter().enumerate() {
             let name: &'static str = WORKER_NAMES.get(i).copied().unwrap_or("detector");
             let (intake, done, min_quality) = (intake.clone(), done_tx.clone(), opts.min_quality);
+            let prior = prior.clone();
             threads.spawn(name, move |hb| {
-                run_worker(hb, proc, &intake, done, min_quality)
+                run_worker(hb, proc, &intake, done, min_quality, &prior)
             })?;
         }
         drop(done_tx);
@@ -322,6 +403,9 @@ impl Pipeline {
         let order = Reorder::new(opts.estimate_queue + 2 * workers + 2);
         let mut out = Outlet::new(publishers, record, release);
         out.guidance = opts.guidance.clone();
+        if out.guidance.is_some() {
+            out.narrow = opts.narrow_search.map(|n| (n, prior));
+        }
         let status_interval = opts.status_interval;
         threads.spawn("publisher", move |hb| {
             run_publisher(hb, done_rx, order, out, status_interval)
@@ -574,6 +658,7 @@ fn run_worker(
     intake: &Mutex<Intake>,
     done: Sender<Done>,
     min_quality: f64,
+    prior: &PriorSlot,
 ) {
     let mut det = Detection::default();
     loop {
@@ -584,7 +669,15 @@ fn run_worker(
             Err(RecvTimeoutError::Disconnected) => break,
         };
         hb.beat();
-        let estimate = detect(hb.shared(), proc.as_mut(), &frame, &mut det, min_quality);
+        let p = *prior.lock().unwrap_or_else(|e| e.into_inner());
+        let estimate = detect(
+            hb.shared(),
+            proc.as_mut(),
+            &frame,
+            p.as_ref(),
+            &mut det,
+            min_quality,
+        );
         let d = Done {
             ticket,
             frame,
@@ -603,12 +696,13 @@ fn detect(
     sh: &Shared,
     proc: &mut dyn Processor,
     frame: &Frame,
+    prior: Option<&DetectorPrior>,
     det: &mut Detection,
     min_quality: f64,
 ) -> Estimate {
     let t = Instant::now();
     let result = match frame.view() {
-        Ok(view) => proc.process(&view, det),
+        Ok(view) => proc.process_with_prior(&view, prior, det),
         Err(e) => Err(e.into()),
     };
     let ms = t.elapsed().as_secs_f64() * 1e3;
@@ -721,7 +815,13 @@ struct Outlet {
     release: Release,
     last_seq: u64,
     guidance: Option<Guidance>,
+    /// The tracker's prediction into the workers' prior, with the last measured tilt.
+    narrow: Option<(NarrowSearch, PriorSlot)>,
+    last_tilt_rad: f64,
 }
+
+/// The detector prior the publisher leaves for the workers' next frames.
+type PriorSlot = Arc<Mutex<Option<DetectorPrior>>>;
 
 impl Outlet {
     fn new(
@@ -735,6 +835,8 @@ impl Outlet {
             release,
             last_seq: 0,
             guidance: None,
+            narrow: None,
+            last_tilt_rad: 0.0,
         }
     }
 
@@ -747,6 +849,13 @@ impl Outlet {
         } = done;
         if let Some(g) = self.guidance.as_mut() {
             estimate.apply_guidance(g);
+        }
+        if let Some((n, slot)) = &self.narrow {
+            if let Some(t) = estimate.tilt_rad {
+                self.last_tilt_rad = t;
+            }
+            *slot.lock().unwrap_or_else(|e| e.into_inner()) =
+                n.prior(&estimate, self.last_tilt_rad);
         }
         estimate.stamp_published(now_ns());
         self.last_seq = estimate.seq;

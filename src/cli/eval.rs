@@ -74,6 +74,10 @@ pub struct GuidanceArgs {
     pub width: u32,
     #[arg(long, default_value_t = 1024)]
     pub height: u32,
+    /// Run every frame's full search (no prior from the tracker's prediction, as the node
+    /// with `[pipeline] narrow_search = false`).
+    #[arg(long)]
+    pub no_narrow: bool,
 }
 
 /// `omnirow eval guidance`.
@@ -87,7 +91,7 @@ fn guidance(a: GuidanceArgs) -> anyhow::Result<ExitCode> {
     let mut scores = Vec::new();
     for s in eval::guidance::scenarios(a.width, a.height, a.seconds) {
         eprintln!("eval guidance: {} ({} frames)", s.name, s.frames);
-        scores.push(eval::guidance::run_drive(&s, &detector)?);
+        scores.push(eval::guidance::run_drive(&s, &detector, !a.no_narrow)?);
     }
     let command: Vec<String> = std::env::args().collect();
     let command = format!("omnirow {}", command[1..].join(" "));

@@ -10,7 +10,7 @@
 
 use crate::camera::{Calibration, IdealLens};
 use crate::config::Config;
-use crate::detect::{Detection, Detector};
+use crate::detect::{Detection, Detector, DetectorPrior};
 use crate::frame::ImageView;
 use crate::guidance::{Guidance, RowFit, RowFitMeasurement, RowFitOptions};
 use crate::notify::Notifier;
@@ -197,6 +197,17 @@ impl Processor for DetectorWorker {
         self.0.process(view, out).map_err(Into::into)
     }
 
+    fn process_with_prior(
+        &mut self,
+        view: &ImageView,
+        prior: Option<&DetectorPrior>,
+        out: &mut Detection,
+    ) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
+        self.0
+            .process_with_prior(view, prior, out)
+            .map_err(Into::into)
+    }
+
     fn row_fit(&mut self, det: &Detection) -> Option<RowFitMeasurement> {
         let fit = self.1.as_mut()?;
         let vp = det.vanishing_point?.direction;
@@ -269,6 +280,9 @@ pub fn run(args: RunArgs, record_to: Option<PathBuf>) -> anyhow::Result<ExitCode
     if let Some(g) = cfg.guidance {
         cfg.pipeline.guidance =
             Some(Guidance::new(g, cal.mounting).context("[guidance] (docs/guidance.md)")?);
+    }
+    if let Some(n) = cfg.pipeline.narrow_search.as_mut() {
+        n.mounting = cal.mounting;
     }
 
     // Detector workers.

@@ -17,6 +17,7 @@ use super::hough::{HoughOptions, HoughResult, HoughRows};
 use super::mask::{build_mask, find_fov, MaskOptions, MaskResult};
 use super::pencil::{Candidate, PencilOptions, PencilResult, PencilRows};
 use super::pose::heading_tilt;
+use super::prior::DetectorPrior;
 use super::refit::{refit_rows, RefitImage, RefitOptions, Tiles};
 use super::smooth::{Gaussian, SmoothOptions};
 use super::threshold::{keep_brightest, ThresholdOptions, ThresholdResult};
@@ -566,6 +567,19 @@ impl VanishingStage {
     }
 }
 
+/// What a prior on the vanishing point did in the last image
+/// ([`Detector::process_with_prior`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum PriorOutcome {
+    /// No prior (or the pencil method): the full search ran.
+    #[default]
+    None,
+    /// The narrowed search found a vanishing point inside the prior's window.
+    Accepted,
+    /// The narrowed search found none inside the window; the full search ran after it.
+    FullSearch,
+}
+
 /// Time spent in each stage of the last image.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct StageTimes {
@@ -613,6 +627,7 @@ pub struct Detector {
     last_hough: HoughResult,
     last_edge: EdgeResult,
     last_pencil: PencilResult,
+    last_prior: PriorOutcome,
     pencil_candidates: Vec<Candidate>,
     pencil_rows: Vec<Row>,
     pencil_bands: Vec<f64>,
@@ -671,6 +686,7 @@ impl Detector {
             last_hough: HoughResult::default(),
             last_edge: EdgeResult::default(),
             last_pencil: PencilResult::default(),
+            last_prior: PriorOutcome::None,
             pencil_candidates: Vec::with_capacity(16),
             pencil_rows: Vec::with_capacity(64),
             pencil_bands: Vec::with_capacity(64),
@@ -683,10 +699,69 @@ impl Detector {
 
     /// Detects rows, the vanishing point, heading and tilt in one image, into `out`.
     pub fn process(&mut self, view: &ImageView, out: &mut Detection) -> Result<(), DetectError> {
-        let method = self.opts.method;
+        self.process_with_prior(view, None, out)
+    }
+
+    /// As [`Detector::process`], narrowed by a `prior` on the vanishing point when there is
+    /// one ([`super::prior`]): the row Hough votes and peaks only where rows through the
+    /// prior's window are, and the vanishing point is sought there. When that gives no
+    /// vanishing point inside the window, the full search runs on the same prepared points
+    /// (and edge rows), so the answer is never worse than without a prior.
+    /// [`Detector::last_prior`] tells which happened. The pencil method ignores the prior.
+    pub fn process_with_prior(
+        &mut self,
+        view: &ImageView,
+        prior: Option<&DetectorPrior>,
+        out: &mut Detection,
+    ) -> Result<(), DetectError> {
+        let window = match prior {
+            Some(p) if self.opts.method != Method::Pencil => Some((p.validate()?, p.window_rad)),
+            _ => None,
+        };
         let t0 = Instant::now();
         self.last_prepare = self.prep.run(view, &mut self.points)?;
         let t1 = Instant::now();
+        self.last_prior = PriorOutcome::None;
+        let Some((vp, w)) = window else {
+            return self.detect_prepared(out, t0, t1, true);
+        };
+        self.hough.set_window(Some((&vp, w)));
+        self.vanish.finder.set_window(Some((&vp, w)));
+        let narrowed = self.detect_prepared(out, t0, t1, true);
+        self.hough.set_window(None);
+        self.vanish.finder.set_window(None);
+        narrowed?;
+        let inside = out
+            .vanishing_point
+            .is_some_and(|v| crate::sphere::axis_angle(&v.direction, &vp) <= w);
+        if inside {
+            self.last_prior = PriorOutcome::Accepted;
+            return Ok(());
+        }
+        // The full search; the narrowed attempt's time counts in the Hough stage.
+        let spent = self.times.hough + self.times.vanishing;
+        self.detect_prepared(out, t0, t1, false)?;
+        self.times.hough += spent;
+        self.last_prior = PriorOutcome::FullSearch;
+        Ok(())
+    }
+
+    /// What the prior did in the last image.
+    pub fn last_prior(&self) -> PriorOutcome {
+        self.last_prior
+    }
+
+    /// Everything after the preparation (started at `t0`, done at `t1`): the chosen method's
+    /// rows, the vanishing point, heading and tilt. `edge` false keeps the edge rows of the
+    /// previous call on the same points.
+    fn detect_prepared(
+        &mut self,
+        out: &mut Detection,
+        t0: Instant,
+        t1: Instant,
+        edge: bool,
+    ) -> Result<(), DetectError> {
+        let method = self.opts.method;
         out.rows.clear();
         self.last_hough = HoughResult::default();
         self.last_pencil = PencilResult::default();
@@ -717,10 +792,12 @@ impl Detector {
         }
         let n_hough = out.rows.len();
         let t2 = Instant::now();
-        self.edge_rows.clear();
-        self.last_edge = EdgeResult::default();
-        if method != Method::Hough {
-            self.run_edge()?;
+        if edge {
+            self.edge_rows.clear();
+            self.last_edge = EdgeResult::default();
+            if method != Method::Hough {
+                self.run_edge()?;
+            }
         }
         let t3 = Instant::now();
         // Eq. 5: edge rows weigh w·support, Hough rows (1−w)·support. A single method's
@@ -774,7 +851,7 @@ impl Detector {
         self.times = StageTimes {
             prepare: t1 - t0,
             hough: t2 - t1,
-            edge: t3 - t2,
+            edge: if edge { t3 - t2 } else { self.times.edge },
             vanishing: t4 - t3,
         };
         Ok(())

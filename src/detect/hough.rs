@@ -183,6 +183,22 @@ pub struct HoughRows {
     bands: Vec<f64>,
     /// Non-maximum-suppression window offsets, nearest first (most cells lose to a neighbour).
     nms: Vec<(isize, isize)>,
+    /// The search window of the next runs ([`HoughRows::set_window`]), if any.
+    window: Option<Window>,
+}
+
+/// Only great circles through (near) a known vanishing point: their normals lie in a band
+/// around the great circle perpendicular to it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Window {
+    /// The vanishing point (unit, camera frame).
+    vp: Vector3<f64>,
+    /// Sine of the band's half-width for voting (the window widened by the cells the
+    /// peaks' non-maximum suppression looks at, so that cells inside see the same votes and
+    /// neighbours as in the full transform).
+    sin_vote: f64,
+    /// Sine of the band's half-width a peak's cell centre must lie within.
+    sin_peak: f64,
 }
 
 /// atan2 for f32 with an error below 1e-5 rad (enough to pick a 2° cell), branch-light.
@@ -269,7 +285,68 @@ impl HoughRows {
                 v.sort_by_key(|&(a, b)| a * a + b * b);
                 v
             },
+            window: None,
         })
+    }
+
+    /// Narrows the next runs to rows whose vanishing point lies within `half_width_rad` of
+    /// `vp` (unit, camera frame; sign free), or lifts the narrowing (`None`). A ray then
+    /// votes only in the accumulator columns where its curve passes through the band of
+    /// normals perpendicular to such a vanishing point, and only peaks in that band become
+    /// rows. Cells inside the band get the same votes as without a window.
+    pub fn set_window(&mut self, window: Option<(&Vector3<f64>, f64)>) {
+        let cell = std::f64::consts::PI / self.opts.phi_bins().min(self.opts.theta_bins()) as f64;
+        let diag = std::f64::consts::SQRT_2 * cell;
+        self.window = window.map(|(vp, w)| Window {
+            vp: vp.normalize(),
+            sin_vote: (w + (self.opts.nms_radius as f64 + 1.0) * diag)
+                .min(std::f64::consts::FRAC_PI_2)
+                .sin(),
+            sin_peak: (w + diag).min(std::f64::consts::FRAC_PI_2).sin(),
+        });
+    }
+
+    /// The accumulator columns (first, count; wrapping past the last) where the curve of
+    /// `ray` passes through the window's band, or `None` for every column. The normals
+    /// perpendicular to the ray form a great circle n(t) = cos t·a + sin t·b with
+    /// a = ray × vp / |ray × vp| and b = ray × a, on which |n·vp| = |sin t|·|ray × vp|: the
+    /// band holds the arc |t| ≤ δ = asin(sin w / |ray × vp|). Each column holds one of the
+    /// circle's normals (up to sign) and θ (mod π) runs monotonically along it, so the arc's
+    /// columns are those between its ends' θ on the side that holds a's, widened by one.
+    /// An arc that passes near a pole of the accumulator (where θ turns fast) takes them all.
+    fn window_columns(&self, ray: &[f32; 3]) -> Option<(usize, usize)> {
+        use std::f64::consts::PI;
+        let w = self.window.as_ref()?;
+        let t = self.opts.theta_bins();
+        let p = Vector3::new(ray[0] as f64, ray[1] as f64, ray[2] as f64).normalize();
+        let c = p.cross(&w.vp);
+        let s = c.norm();
+        if s <= w.sin_vote {
+            return None;
+        }
+        let a = c / s;
+        let b = p.cross(&a);
+        let delta = (w.sin_vote / s).asin();
+        // The circle's point nearest the pole (±z): within the arc or its antipode and near
+        // the pole, the arc sweeps (almost) every column.
+        let t_pole = b.z.atan2(a.z);
+        let off = (t_pole.rem_euclid(PI) - PI / 2.0).abs();
+        if PI / 2.0 - off <= delta && p.z.abs() < w.sin_vote {
+            return None;
+        }
+        let theta = |n: Vector3<f64>| n.y.atan2(n.x).rem_euclid(PI);
+        let (sd, cd) = delta.sin_cos();
+        let (th0, lo, hi) = (theta(a), theta(a * cd - b * sd), theta(a * cd + b * sd));
+        let ahead = |from: f64, to: f64| (to - from).rem_euclid(PI);
+        let (start, span) = if ahead(lo, th0) <= ahead(lo, hi) {
+            (lo, ahead(lo, hi))
+        } else {
+            (hi, ahead(hi, lo))
+        };
+        let cell = PI / t as f64;
+        let first = ((start / cell) as usize).min(t - 1);
+        let count = ((start + span) / cell) as usize - first + 3;
+        (count < t).then_some(((first + t - 1) % t, count))
     }
 
     pub fn options(&self) -> &HoughOptions {
@@ -319,8 +396,6 @@ impl HoughRows {
     fn vote(&mut self, rays: &[[f32; 3]]) {
         let p = self.opts.phi_bins();
         let t = self.opts.theta_bins();
-        let scale = p as f32 / PI32;
-        let pmax = (p - 1) as f32;
         let stride = p + 1;
         self.diff.fill(0);
         self.vote_stride = match self.opts.vote_points {
@@ -333,16 +408,15 @@ impl HoughRows {
             let mz = -r[2];
             let sign = if mz < 0.0 { -1.0f32 } else { 1.0 };
             let (px, py, y) = (r[0] * sign, r[1] * sign, mz.abs());
-            // The φ cell at every column edge (a loop the compiler vectorises).
-            for ((e, &c), &s) in self.edge.iter_mut().zip(&self.cos_e).zip(&self.sin_e) {
-                *e = (atan2_upper(y, px * c + py * s) * scale).min(pmax) as i32;
-            }
-            // φ(θ) is continuous for a fixed ray (atan2 of a fixed-sign numerator), so the
-            // cells between a column's two edges are exactly those the curve crosses.
-            for (col, e) in self.diff.chunks_exact_mut(stride).zip(self.edge.windows(2)) {
-                let (lo, hi) = (e[0].min(e[1]) as usize, e[0].max(e[1]) as usize);
-                col[lo] = col[lo].wrapping_add(1);
-                col[hi + 1] = col[hi + 1].wrapping_sub(1);
+            match self.window_columns(r) {
+                None => self.vote_columns(y, px, py, 0, t),
+                Some((first, count)) if first + count <= t => {
+                    self.vote_columns(y, px, py, first, first + count)
+                }
+                Some((first, count)) => {
+                    self.vote_columns(y, px, py, first, t);
+                    self.vote_columns(y, px, py, 0, first + count - t);
+                }
             }
         }
         for k in 0..t {
@@ -352,6 +426,34 @@ impl HoughRows {
                 sum = sum.wrapping_add(d);
                 *a = sum;
             }
+        }
+    }
+
+    /// One ray's votes in θ columns `from..to`: the φ cell of its curve at each column edge
+    /// (a loop the compiler vectorises), then the run of cells between a column's two edges,
+    /// recorded in the difference array. φ(θ) is continuous for a fixed ray (atan2 of a
+    /// fixed-sign numerator), so the cells between a column's two edges are exactly those
+    /// the curve crosses. `y`, `px`, `py`: the ray with φ(θ) = atan2(y, px cos θ + py sin θ).
+    #[inline(always)]
+    fn vote_columns(&mut self, y: f32, px: f32, py: f32, from: usize, to: usize) {
+        let scale = self.opts.phi_bins() as f32 / PI32;
+        let pmax = (self.opts.phi_bins() - 1) as f32;
+        let stride = self.opts.phi_bins() + 1;
+        let edges = &mut self.edge[from..=to];
+        for ((e, &c), &s) in edges
+            .iter_mut()
+            .zip(&self.cos_e[from..=to])
+            .zip(&self.sin_e[from..=to])
+        {
+            *e = (atan2_upper(y, px * c + py * s) * scale).min(pmax) as i32;
+        }
+        for (col, e) in self.diff[from * stride..to * stride]
+            .chunks_exact_mut(stride)
+            .zip(edges.windows(2))
+        {
+            let (lo, hi) = (e[0].min(e[1]) as usize, e[0].max(e[1]) as usize);
+            col[lo] = col[lo].wrapping_add(1);
+            col[hi + 1] = col[hi + 1].wrapping_sub(1);
         }
     }
 
@@ -371,11 +473,34 @@ impl HoughRows {
         (kk * p + jj) as usize
     }
 
+    /// Whether cell (θ column k, φ cell j) may hold a row of the window (always without one).
+    #[inline]
+    fn in_window(&self, k: usize, j: usize) -> bool {
+        self.window.as_ref().map_or(true, |w| {
+            self.cell_normal(k, j).dot(&w.vp).abs() < w.sin_peak
+        })
+    }
+
+    /// The highest cell in the window (the peaks' fraction is of the window's rows).
+    fn window_max(&self) -> u32 {
+        let p = self.opts.phi_bins();
+        let mut max = 0;
+        for (idx, &v) in self.acc.iter().enumerate() {
+            if v > max && self.in_window(idx / p, idx % p) {
+                max = v;
+            }
+        }
+        max
+    }
+
     #[inline(never)]
     fn find_peaks(&mut self) -> u32 {
         let p = self.opts.phi_bins();
         let t = self.opts.theta_bins();
-        let max = self.acc.iter().copied().max().unwrap_or(0);
+        let max = match self.window {
+            None => self.acc.iter().copied().max().unwrap_or(0),
+            Some(_) => self.window_max(),
+        };
         let floor = (self
             .opts
             .min_support
@@ -387,7 +512,7 @@ impl HoughRows {
             for j in 0..p {
                 let idx = k * p + j;
                 let v = self.acc[idx];
-                if v < floor {
+                if v < floor || !self.in_window(k, j) {
                     continue;
                 }
                 let mut is_peak = true;
@@ -648,6 +773,66 @@ pub(crate) mod tests {
             rays.push([p.x as f32, p.y as f32, p.z as f32]);
         }
         (normals, rays)
+    }
+
+    #[test]
+    fn a_window_votes_as_the_full_transform_inside_it_and_keeps_only_its_rows() {
+        // Three rows through one vanishing point, two through another 20° away, noise.
+        let vp = Vector3::new(0.2, 1.0, 0.05).normalize();
+        let other = Vector3::new(-0.15, 1.0, 0.05).normalize();
+        let (normals, mut rays) = rows_through(vp, &[0.3, 1.2, 2.2], 1500, 1000, 7);
+        let (others, more) = rows_through(other, &[0.7, 1.9], 1500, 0, 8);
+        rays.extend(more);
+        let weights = vec![1.0f32; rays.len()];
+        let opts = HoughOptions {
+            vote_points: 0,
+            phi_bins: Some(180),
+            theta_bins: Some(180),
+            ..Default::default()
+        };
+        let mut full = HoughRows::new(opts).unwrap();
+        let mut all = Vec::new();
+        full.find_rows(&rays, &weights, &mut all).unwrap();
+        let mut narrow = HoughRows::new(opts).unwrap();
+        let w = 0.02;
+        narrow.set_window(Some((&vp, w)));
+        let mut rows = Vec::new();
+        narrow.find_rows(&rays, &weights, &mut rows).unwrap();
+        // Every cell whose normal is within the window's band sees exactly the full votes.
+        let (p, t) = (opts.phi_bins(), opts.theta_bins());
+        let mut inside = 0;
+        for k in 0..t {
+            for j in 0..p {
+                if narrow.cell_normal(k, j).dot(&vp).abs() < (w + 0.03).sin() {
+                    inside += 1;
+                    assert_eq!(narrow.acc[k * p + j], full.acc[k * p + j], "cell {k},{j}");
+                }
+            }
+        }
+        assert!(inside > 500, "{inside}");
+        // Fewer cells got votes at all (rays near the vanishing point vote everywhere).
+        let voted = |h: &HoughRows| h.acc.iter().filter(|&&v| v > 0).count();
+        assert!(
+            voted(&narrow) * 3 < voted(&full) * 2,
+            "{} {}",
+            voted(&narrow),
+            voted(&full)
+        );
+        let near =
+            |rows: &[Row], n: &Vector3<f64>| rows.iter().any(|r| axis_angle(&r.normal, n) < 1e-3);
+        for n in &normals {
+            assert!(near(&all, n) && near(&rows, n), "row {n:?}");
+        }
+        for n in &others {
+            assert!(near(&all, n), "the full transform finds {n:?}");
+            assert!(!near(&rows, n), "the window keeps out {n:?}");
+        }
+        // Lifting the window restores the full transform.
+        narrow.set_window(None);
+        rows.clear();
+        narrow.find_rows(&rays, &weights, &mut rows).unwrap();
+        assert_eq!(rows, all);
+        assert_eq!(narrow.acc, full.acc);
     }
 
     #[test]

@@ -13,6 +13,7 @@ pub mod mask;
 pub mod overlay;
 pub mod pencil;
 pub mod pose;
+pub mod prior;
 pub mod refit;
 pub mod scale;
 pub mod sections;
@@ -21,7 +22,10 @@ pub mod threshold;
 pub mod vanishing;
 pub mod vegetation;
 
-pub use detector::{CombinedOptions, Detector, DetectorOptions, Points, Preparer, VanishingStage};
+pub use detector::{
+    CombinedOptions, Detector, DetectorOptions, Points, Preparer, PriorOutcome, VanishingStage,
+};
+pub use prior::DetectorPrior;
 
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};

@@ -131,6 +131,10 @@ pub struct VanishingFinder {
     elev_bins: usize,
     acc: Vec<f64>,
     robot_normals: Vec<Vector3<f64>>,
+    /// The search window of the next runs ([`VanishingFinder::set_window`]): the expected
+    /// direction (unit, robot frame) and the cosine of the window's half-angle widened by a
+    /// cell's diagonal.
+    window: Option<(Vector3<f64>, f64)>,
 }
 
 impl VanishingFinder {
@@ -162,7 +166,24 @@ impl VanishingFinder {
             elev_bins,
             acc: vec![0.0; a * elev_bins],
             robot_normals: Vec::with_capacity(64),
+            window: None,
         })
+    }
+
+    /// Takes the next runs' winning cell only within `half_width_rad` of `vp` (camera frame,
+    /// sign free), or anywhere (`None`). The fit that follows may still move the direction
+    /// out of the window; the caller checks it.
+    pub fn set_window(&mut self, window: Option<(&Vector3<f64>, f64)>) {
+        let cell = (std::f64::consts::PI / self.opts.azimuth_bins() as f64)
+            .max(2.0 * self.max_tilt / self.elev_bins as f64);
+        self.window = window.map(|(vp, w)| {
+            (
+                (self.robot_from_camera * vp).normalize(),
+                (w + std::f64::consts::SQRT_2 * cell)
+                    .min(std::f64::consts::FRAC_PI_2)
+                    .cos(),
+            )
+        });
     }
 
     pub fn options(&self) -> &VanishingOptions {
@@ -315,24 +336,42 @@ impl VanishingFinder {
 
     /// Direction (robot frame) at the centre of the highest cell, if any cell has votes.
     fn winner(&self) -> Option<Vector3<f64>> {
-        let (idx, &best) = self
-            .acc
-            .iter()
-            .enumerate()
-            .max_by(|a, b| a.1.total_cmp(b.1).then(b.0.cmp(&a.0)))?;
+        let (idx, best) = match self.window {
+            None => self
+                .acc
+                .iter()
+                .copied()
+                .enumerate()
+                .max_by(|a, b| a.1.total_cmp(&b.1).then(b.0.cmp(&a.0)))?,
+            // The first highest cell in the window, as above (the lowest index of equals).
+            Some((v, cos_w)) => {
+                let mut best = (0, 0.0);
+                for (idx, &x) in self.acc.iter().enumerate() {
+                    if x > best.1 && self.cell_direction(idx).dot(&v).abs() >= cos_w {
+                        best = (idx, x);
+                    }
+                }
+                best
+            }
+        };
         if best <= 0.0 {
             return None;
         }
+        Some(self.cell_direction(idx))
+    }
+
+    /// The direction (robot frame) at the centre of accumulator cell `idx`.
+    fn cell_direction(&self, idx: usize) -> Vector3<f64> {
         let e = self.elev_bins;
         let tilt = self.max_tilt;
         let (k, j) = (idx / e, idx % e);
         let alpha = (k as f64 + 0.5) * std::f64::consts::PI / self.opts.azimuth_bins() as f64;
         let beta = -tilt + (j as f64 + 0.5) * 2.0 * tilt / e as f64;
-        Some(Vector3::new(
+        Vector3::new(
             beta.cos() * alpha.cos(),
             beta.cos() * alpha.sin(),
             beta.sin(),
-        ))
+        )
     }
 }
 

@@ -130,10 +130,13 @@ fn quantile(v: &mut [f64], p: f64) -> f64 {
     v[((v.len() - 1) as f64 * p).round() as usize]
 }
 
-/// Runs one drive through the detector (with `detector` options), the row fit and guidance.
+/// Runs one drive through the detector (with `detector` options), the row fit and guidance;
+/// with `narrow`, each frame's search is narrowed by the tracker's prediction as the node's
+/// pipeline does ([`crate::pipeline::NarrowSearch`]).
 pub fn run_drive(
     s: &Scenario,
     detector: &DetectorOptions,
+    narrow: bool,
 ) -> Result<DriveScore, GuidanceEvalError> {
     let fail = |problem: String| GuidanceEvalError::Drive {
         drive: s.name.to_string(),
@@ -146,6 +149,8 @@ pub fn run_drive(
     let mut guidance =
         Guidance::new(GuidanceOptions::default(), cal.mounting).map_err(|e| fail(e.to_string()))?;
     let mut d = Detection::default();
+    let narrow = narrow.then(|| crate::pipeline::NarrowSearch::new(cal.mounting));
+    let (mut prior, mut tilt) = (None, 0.0);
     let (mut offs, mut heads, mut curv) = (Vec::new(), Vec::new(), Vec::new());
     let mut score = DriveScore {
         name: s.name.to_string(),
@@ -167,7 +172,7 @@ pub fn run_drive(
     for seq in 0..s.frames {
         let frame = drive.frame_at(seq).map_err(|e| fail(e.to_string()))?;
         let view = frame.view().map_err(|e| fail(e.to_string()))?;
-        det.process(&view, &mut d)
+        det.process_with_prior(&view, prior.as_ref(), &mut d)
             .map_err(|e| fail(e.to_string()))?;
         let mut est = Estimate::from_detection(&frame, &d, 0.0, 0.3);
         if let Some(vp) = d.vanishing_point {
@@ -180,6 +185,10 @@ pub fn run_drive(
             );
         }
         est.apply_guidance(&mut guidance);
+        if let Some(n) = &narrow {
+            tilt = est.tilt_rad.unwrap_or(tilt);
+            prior = n.prior(&est, tilt);
+        }
         let (Some(t), Some(g)) = (est.truth.as_ref(), est.guidance.as_ref()) else {
             return Err(fail("a frame without truth or guidance".into()));
         };
@@ -321,7 +330,7 @@ mod tests {
     fn a_short_weaving_drive_scores_within_the_targets_and_writes_its_files() {
         let mut s = scenarios(306, 256, 1.0).remove(0);
         s.frames = 8;
-        let d = run_drive(&s, &DetectorOptions::default()).unwrap();
+        let d = run_drive(&s, &DetectorOptions::default(), true).unwrap();
         assert_eq!(d.frames, 8);
         assert_eq!(d.estimated, 8);
         assert_eq!(d.row_jumps, 0);
