@@ -170,6 +170,7 @@ fn layout_reads_what_a_recording_holds() {
 
     let mut checked = 0;
     let mut shown = false;
+    let mut annotated = false;
     for (id, cfg) in panels {
         for t in cfg["topics"].as_object().into_iter().flat_map(|t| t.keys()) {
             assert!(
@@ -181,6 +182,15 @@ fn layout_reads_what_a_recording_holds() {
         }
         if let Some(t) = cfg["imageMode"]["imageTopic"].as_str() {
             assert!(topics.contains(t), "{id}: no channel {t} in {topics:?}");
+            checked += 1;
+        }
+        for t in cfg["imageMode"]["annotations"]
+            .as_object()
+            .into_iter()
+            .flat_map(|t| t.keys())
+        {
+            assert!(topics.contains(t), "{id}: no annotations channel {t}");
+            annotated = true;
             checked += 1;
         }
         if let Some(t) = cfg["topicPath"].as_str() {
@@ -202,6 +212,7 @@ fn layout_reads_what_a_recording_holds() {
     }
     assert!(checked >= 14, "only {checked} references checked");
     assert!(shown, "no panel shows the user script's {output}");
+    assert!(annotated, "the image panel draws no annotations channel");
 
     // The script on a recorded estimate: a grey line per ground row, then the followed line
     // where omnirow's overlay puts it.
@@ -230,7 +241,9 @@ fn layout_reads_what_a_recording_holds() {
             "{line}"
         );
     }
-    let want = omnirow::publish::overlay::followed_lines(&g).unwrap().line;
+    let want = omnirow::guidance::followed::followed_lines(&g)
+        .unwrap()
+        .line;
     let followed = lines.last().unwrap();
     for p in followed["points"].as_array().unwrap() {
         let v = point(p) - want.point_m;

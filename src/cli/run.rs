@@ -264,6 +264,7 @@ pub fn run(args: RunArgs, record_to: Option<PathBuf>) -> anyhow::Result<ExitCode
     };
     if let Some(rec) = cfg.record.as_mut() {
         rec.calibration_toml = Some(cal.to_toml());
+        rec.annotate = Some(cal.clone());
     }
     // Odometry from ROS 2 for guidance's motion model, when both are on.
     let odometry =

@@ -944,8 +944,9 @@ impl Detector {
     ///
     /// Each candidate vanishing point (the strongest local maxima of the profile's
     /// contrast) gives its rows, each refitted freely on its points; the vanishing stage
-    /// then tells how well those rows still meet in one point. The candidate whose contrast
-    /// times that quality is highest wins: a wrong candidate that lines up one strong
+    /// then tells how well those rows still meet in one point, and the comb fitted to its
+    /// profile how evenly spaced its rows are. The candidate whose contrast times that
+    /// quality times the comb's contrast (to `pencil.comb_power`) is highest wins: a wrong candidate that lines up one strong
     /// structure sharply gives rows that do not agree once refitted.
     fn run_pencil(&mut self, out: &mut Detection) -> Result<(), DetectError> {
         let p = &self.points;
@@ -959,7 +960,12 @@ impl Detector {
             self.pencil
                 .read_rows(&c.direction, &p.rays, &p.weights, &mut out.rows);
             let r = self.vanish.run(None, out)?;
-            let score = c.contrast * r.quality;
+            let comb = self
+                .pencil
+                .last_comb()
+                .map_or(0.0, |c| c.comb.contrast)
+                .max(0.05);
+            let score = c.contrast * r.quality * comb.powf(self.opts.pencil.comb_power);
             if best.map_or(true, |b| score > b.0) {
                 best = Some((score, k));
                 self.pencil_rows.clear();

@@ -4,6 +4,7 @@
 //! The stages (mask, vegetation, Hough, edge, vanishing point, pose) live in their own files;
 //! [`Detector`] owns their buffers and runs them in order (prepare → Hough → vanishing point).
 
+pub mod comb;
 pub mod combine;
 pub mod detector;
 pub mod edge;

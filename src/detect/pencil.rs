@@ -16,6 +16,7 @@
 //! of the working image and converted through the calibration (the angular size of the
 //! points' pixels), so that the same image through any focal length gives the same rows.
 
+use super::comb::{fit_peak_comb_rolled, CombSearch, RolledComb, TanAxis};
 use super::{DetectError, Method, Row};
 use crate::camera::Mounting;
 use crate::sphere::Scatter;
@@ -66,6 +67,37 @@ pub struct PencilOptions {
     /// (around the vanishing point), at most this (degrees). Default (absent): from the
     /// calibration's field of view (3° at the GC2450C's; [`super::scale`]).
     pub polish_max_band_deg: Option<f64>,
+    /// Fit the rows' comb (equal spacing in tan ψ, [`super::comb`]) to the profile: peaks
+    /// off the comb are not rows, and an empty tooth between rows gets the weak peak there.
+    pub comb: bool,
+    /// The comb is used only when its contrast is at least this.
+    pub comb_min_contrast: f64,
+    /// Longest row spacing the comb searches (pixels across the rows near the robot).
+    pub comb_max_period_px: f64,
+    /// A weak peak on an empty tooth is a row when it stands this fraction above the
+    /// profile's local mean (the strong peaks need `min_prominence`).
+    pub comb_weak_prominence: f64,
+    /// The comb is searched at reference angles (around the vanishing point) within ± this
+    /// of the assumed ground normal's (degrees): a roll about the rows, or a wrong focal
+    /// length, bends the comb in tan ψ ([`super::comb::TanAxis`]).
+    pub comb_max_roll_deg: f64,
+    /// Candidate vanishing points are ranked by their contrast times the comb's contrast
+    /// (floored at 0.05) to this power: the right point gives evenly spaced rows.
+    pub comb_power: f64,
+}
+
+/// Step of the comb's reference angles (degrees), before two halvings around the best.
+const COMB_ROLL_STEP_DEG: f64 = 2.0;
+
+/// The comb's search on a profile whose rows are at least `sep` bins apart: periods from
+/// `sep` to `comb_max_period_px`, a peak on a tooth within half of `sep`.
+fn comb_search(sep: usize, opts: &PencilOptions) -> CombSearch {
+    CombSearch {
+        min_period: sep as f64,
+        max_period: opts.comb_max_period_px / opts.bin_px,
+        tolerance: (0.5 * sep as f64).max(1.0),
+        ..CombSearch::default()
+    }
 }
 
 /// The polish's widest band (degrees) at the reference angular resolution.
@@ -90,6 +122,12 @@ impl Default for PencilOptions {
             coverage_power: 2.0,
             polish: true,
             polish_max_band_deg: None,
+            comb: true,
+            comb_min_contrast: 0.25,
+            comb_max_period_px: 400.0,
+            comb_weak_prominence: 0.1,
+            comb_max_roll_deg: 20.0,
+            comb_power: 0.0,
         }
     }
 }
@@ -109,6 +147,7 @@ impl PencilOptions {
             ("min_separation_px", self.min_separation_px),
             ("smooth_px", self.smooth_px),
             ("max_tan", self.max_tan),
+            ("comb_max_period_px", self.comb_max_period_px),
         ];
         for (name, v) in positive {
             if !(v.is_finite() && v > 0.0) {
@@ -127,6 +166,30 @@ impl PencilOptions {
         if !(b > 0.0 && b <= 30.0) {
             return Err(DetectError::Options(format!(
                 "pencil.polish_max_band_deg = {b} must be within (0, 30]"
+            )));
+        }
+        if !(-1.0..=1.0).contains(&self.comb_min_contrast) {
+            return Err(DetectError::Options(format!(
+                "pencil.comb_min_contrast = {} must be within -1..=1",
+                self.comb_min_contrast
+            )));
+        }
+        if !(self.comb_weak_prominence >= 0.0 && self.comb_weak_prominence.is_finite()) {
+            return Err(DetectError::Options(format!(
+                "pencil.comb_weak_prominence = {} must be >= 0",
+                self.comb_weak_prominence
+            )));
+        }
+        if !(0.0..=60.0).contains(&self.comb_max_roll_deg) {
+            return Err(DetectError::Options(format!(
+                "pencil.comb_max_roll_deg = {} must be within 0..=60",
+                self.comb_max_roll_deg
+            )));
+        }
+        if !(0.0..=10.0).contains(&self.comb_power) {
+            return Err(DetectError::Options(format!(
+                "pencil.comb_power = {} must be within 0..=10",
+                self.comb_power
             )));
         }
         if !(0.0..=10.0).contains(&self.coverage_power) {
@@ -209,6 +272,13 @@ pub struct PencilRows {
     evaluated: usize,
     /// The share of the points' weight the last histogram held.
     coverage: f64,
+    /// The comb fitted by the last [`PencilRows::read_rows`], however weak.
+    comb: Option<RolledComb>,
+    /// The peaks as the comb takes them (weight, bin position), and rolled.
+    comb_peaks: Vec<(f64, f64)>,
+    rolled: Vec<(f64, f64)>,
+    /// The teeth taken by the comb's selection, as (tooth, bin).
+    teeth: Vec<(i64, usize)>,
 }
 
 /// A candidate vanishing point and the contrast of the profile around it.
@@ -259,6 +329,10 @@ impl PencilRows {
             cands: Vec::with_capacity(16),
             evaluated: 0,
             coverage: 0.0,
+            comb: None,
+            comb_peaks: Vec::with_capacity(64),
+            rolled: Vec::with_capacity(64),
+            teeth: Vec::with_capacity(64),
         })
     }
 
@@ -576,6 +650,88 @@ impl PencilRows {
         (az, el)
     }
 
+    /// The comb fitted by the last [`Self::read_rows`] (used for the rows only when its
+    /// contrast is at least `comb_min_contrast`).
+    pub fn last_comb(&self) -> Option<RolledComb> {
+        self.comb
+    }
+
+    /// The comb of the smoothed profile (periods from `sep` bins to
+    /// `comb_max_period_px`), when enabled.
+    fn fit_comb(&mut self, sep: usize, axis: &TanAxis) -> Option<RolledComb> {
+        if !self.opts.comb {
+            return None;
+        }
+        let search = comb_search(sep, &self.opts);
+        self.comb_peaks.clear();
+        self.comb_peaks
+            .extend(self.peaks.iter().map(|&(e, i)| (e.sqrt(), i as f64 + 0.5)));
+        fit_peak_comb_rolled(
+            &self.comb_peaks,
+            axis,
+            &search,
+            self.opts.comb_max_roll_deg.to_radians(),
+            COMB_ROLL_STEP_DEG.to_radians(),
+            &mut self.rolled,
+        )
+    }
+
+    /// Fills `self.sel` from `self.peaks` (strongest first) with the comb: each peak within
+    /// the comb's tolerance of a tooth is that tooth's row (the strongest one only); peaks off
+    /// the comb are dropped; each empty tooth between the outermost rows gets the highest
+    /// local maximum of the profile within the tolerance of it, when that stands
+    /// `comb_weak_prominence` above the local mean over ±`wide` bins (`self.prefix` holds the
+    /// smoothed profile's prefix sums).
+    fn select_on_comb(&mut self, rc: &RolledComb, axis: &TanAxis, sep: usize, wide: usize) {
+        let comb = &rc.comb;
+        let tol = comb_search(sep, &self.opts).tolerance;
+        let (mut kmin, mut kmax) = (i64::MAX, i64::MIN);
+        let mut taken = std::mem::take(&mut self.teeth);
+        taken.clear();
+        for &(_, i) in &self.peaks {
+            if taken.len() >= self.opts.max_rows {
+                break;
+            }
+            let (k, d) = comb.nearest_tooth(axis.to_rolled(i as f64 + 0.5, rc.roll));
+            if d <= tol && taken.iter().all(|t| t.0 != k) {
+                taken.push((k, i));
+                kmin = kmin.min(k);
+                kmax = kmax.max(k);
+            }
+        }
+        let nb = self.smooth.len();
+        let mut k = kmin;
+        while k < kmax && taken.len() < self.opts.max_rows {
+            k += 1;
+            if taken.iter().any(|t| t.0 == k) {
+                continue;
+            }
+            let c = comb.tooth(k);
+            let lo = axis.from_rolled(c - tol, rc.roll).floor().max(1.0) as usize;
+            let hi = (axis.from_rolled(c + tol, rc.roll).ceil().max(0.0) as usize)
+                .min(nb.saturating_sub(1));
+            let mut best: Option<usize> = None;
+            for i in lo..hi {
+                let x = self.smooth[i];
+                if x >= self.smooth[i - 1]
+                    && x > self.smooth[i + 1]
+                    && best.map_or(true, |b| x > self.smooth[b])
+                {
+                    best = Some(i);
+                }
+            }
+            let Some(i) = best else { continue };
+            let a = i.saturating_sub(wide);
+            let b = (i + wide + 1).min(nb);
+            let mean = (self.prefix[b] - self.prefix[a]) / (b - a) as f64;
+            if self.smooth[i] > mean * (1.0 + self.opts.comb_weak_prominence) {
+                taken.push((k, i));
+            }
+        }
+        self.sel.extend(taken.iter().map(|t| t.1));
+        self.teeth = taken;
+    }
+
     /// Reads the rows off the profile around `v`: smoothed, the local maxima standing
     /// `min_prominence` above the local mean, at least `min_separation_px` apart, strongest
     /// first; each row's position the weighted mean of its peak.
@@ -626,12 +782,30 @@ impl PencilRows {
         let floor = self.peaks.first().map_or(0.0, |p| p.0) * self.opts.min_peak_fraction;
         self.peaks.retain(|p| p.0 >= floor);
         self.sel.clear();
-        for &(_, i) in &self.peaks {
-            if self.sel.len() >= self.opts.max_rows {
-                break;
-            }
-            if self.sel.iter().all(|&j| i.abs_diff(j) >= sep) {
-                self.sel.push(i);
+        let axis = TanAxis {
+            start: -self.opts.max_tan,
+            bin: bw,
+        };
+        self.comb = self.fit_comb(sep, &axis);
+        tracing::debug!(
+            comb = ?self.comb,
+            peaks = ?self.peaks.iter().map(|p| p.1).collect::<Vec<_>>(),
+            "pencil profile's comb"
+        );
+        match self
+            .comb
+            .filter(|c| c.comb.contrast >= self.opts.comb_min_contrast)
+        {
+            Some(comb) => self.select_on_comb(&comb, &axis, sep, wide),
+            None => {
+                for &(_, i) in &self.peaks {
+                    if self.sel.len() >= self.opts.max_rows {
+                        break;
+                    }
+                    if self.sel.iter().all(|&j| i.abs_diff(j) >= sep) {
+                        self.sel.push(i);
+                    }
+                }
             }
         }
         let Some((e1, e2)) = pencil_frame(v, &-self.up) else {

@@ -12,6 +12,7 @@
 
 pub mod comb;
 pub mod config;
+pub mod followed;
 pub mod ground;
 pub mod headland;
 pub mod motion;

@@ -20,6 +20,7 @@ pub(crate) struct RawRecord {
     reserve_mb: Raw<i64>,
     sync_interval_ms: Raw<i64>,
     json_channels: Raw<JsonChannels>,
+    annotations: Raw<bool>,
 }
 
 impl RawRecord {
@@ -62,6 +63,8 @@ impl RawRecord {
             frame_id,
             calibration_toml: None,
             json_channels: c.get(&self.json_channels, JsonChannels::Json),
+            annotations: c.get(&self.annotations, true),
+            annotate: None,
         };
         (c.get(&self.enabled, false), options)
     }

@@ -11,15 +11,20 @@
 //! duration, and recording stops (detection goes on) when free space would fall below the
 //! reserve, and resumes into a new file once space is back. [`salvage`] reads files that were
 //! damaged afterwards. Each file carries the calibration as the attachment `calibration.toml`. [`image_msg`] holds the CDR and Foxglove image codecs.
+//! With frames, JSON channels and a calibration, each estimate is also drawn over its image
+//! as Foxglove image annotations on `/omnirow/image_annotations` ([`annotations`]).
 
+pub mod annotations;
 mod config;
 pub mod image_msg;
 pub mod salvage;
 
 pub(crate) use config::RawRecord;
 
+use crate::camera::Calibration;
 use crate::estimate::Estimate;
 use crate::frame::Frame;
+use annotations::Annotator;
 use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::BufWriter;
@@ -133,6 +138,14 @@ pub struct RecordOptions {
     pub calibration_toml: Option<String>,
     /// Encoding of the estimate and ground-truth channels.
     pub json_channels: JsonChannels,
+    /// Draw each estimate over its frame as Foxglove image annotations (`record.annotations`,
+    /// default true) when `annotate` gives the calibration.
+    pub annotations: bool,
+    /// The calibration the estimates are drawn through as Foxglove image annotations
+    /// ([`annotations`]), at any uniform scale of the frames' size; `None`, or frames not
+    /// recorded, or [`JsonChannels::Ros2String`] (no ROS 2 message for them): no annotations
+    /// channel.
+    pub annotate: Option<Calibration>,
 }
 
 impl Default for RecordOptions {
@@ -148,6 +161,8 @@ impl Default for RecordOptions {
             frame_id: "omnirow_camera".into(),
             calibration_toml: None,
             json_channels: JsonChannels::Json,
+            annotations: true,
+            annotate: None,
         }
     }
 }
@@ -172,6 +187,8 @@ struct OpenFile {
     image_ch: u16,
     estimate_ch: u16,
     truth_ch: u16,
+    /// The annotations channel, when annotations are written.
+    annotations_ch: Option<u16>,
     image_seq: u32,
     estimate_seq: u32,
 }
@@ -225,6 +242,13 @@ pub struct Recorder {
     since_space_check: u64,
     frames_written: u64,
     bytes_written: u64,
+    /// Draws estimates over the last recorded frame's size (built from `opts.annotate` when
+    /// that size changes); `None` until a frame is recorded or when the calibration does not
+    /// scale to the frames.
+    annotator: Option<Annotator>,
+    /// The frame size `annotator` was last built for (or refused).
+    annotated_size: (u32, u32),
+    annotation_json: String,
 }
 
 impl Recorder {
@@ -266,6 +290,9 @@ impl Recorder {
             since_space_check: 0,
             frames_written: 0,
             bytes_written: 0,
+            annotator: None,
+            annotated_size: (0, 0),
+            annotation_json: String::new(),
         }
     }
 
@@ -389,6 +416,23 @@ impl Recorder {
                 )
             }
         };
+        let annotations_ch = match (&self.opts.annotate, self.opts.json_channels) {
+            (Some(_), JsonChannels::Json) if self.opts.frames && self.opts.annotations => {
+                let schema = writer
+                    .add_schema(
+                        annotations::ANNOTATIONS_SCHEMA_NAME,
+                        "jsonschema",
+                        annotations::ANNOTATIONS_JSON_SCHEMA.as_bytes(),
+                    )
+                    .map_err(mc)?;
+                Some(
+                    writer
+                        .add_channel(schema, annotations::ANNOTATIONS_TOPIC, "json", &none)
+                        .map_err(mc)?,
+                )
+            }
+            _ => None,
+        };
         // The schemas and channels in a chunk of their own: damage to the first frame's chunk
         // does not take the definitions every later frame needs.
         writer.flush().map_err(mc)?;
@@ -403,6 +447,7 @@ impl Recorder {
             image_ch,
             estimate_ch,
             truth_ch,
+            annotations_ch,
             image_seq: 0,
             estimate_seq: 0,
         });
@@ -427,6 +472,7 @@ impl Recorder {
         }
         let need = frame.data.len() as u64 + 1024;
         self.before_write(need)?;
+        self.annotate_size(frame.height, frame.width);
         let Some(f) = self.file.as_mut() else {
             return Ok(());
         };
@@ -508,7 +554,47 @@ impl Recorder {
             })?;
         f.bytes += json.len() as u64 + 40;
         self.bytes_written += json.len() as u64;
+        if let (Some(ch), Some(a)) = (f.annotations_ch, self.annotator.as_mut()) {
+            a.write_json(e, &mut self.annotation_json);
+            let header = mcap::records::MessageHeader {
+                channel_id: ch,
+                ..header
+            };
+            f.writer
+                .write_to_known_channel(&header, self.annotation_json.as_bytes())
+                .map_err(|source| RecordError::Mcap {
+                    path: f.path.clone(),
+                    source,
+                })?;
+            f.bytes += self.annotation_json.len() as u64 + 40;
+            self.bytes_written += self.annotation_json.len() as u64;
+        }
         self.after_write()
+    }
+
+    /// Keeps the annotator at the recorded frames' size: the calibration rescaled to it. A
+    /// size the calibration does not scale to (a region of interest cut off-centre) leaves the
+    /// annotations out, with a warning.
+    fn annotate_size(&mut self, height: u32, width: u32) {
+        let Some(cal) = self
+            .opts
+            .annotate
+            .as_ref()
+            .filter(|_| self.opts.annotations)
+        else {
+            return;
+        };
+        if self.annotated_size == (height, width) {
+            return;
+        }
+        self.annotated_size = (height, width);
+        self.annotator = match cal.rescaled_to(height, width) {
+            Ok(c) => Some(Annotator::new(c)),
+            Err(e) => {
+                tracing::warn!("recording: no image annotations for {width}x{height} frames: {e}");
+                None
+            }
+        };
     }
 
     /// Rotation and the disk reserve, checked before each write.
