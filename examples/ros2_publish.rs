@@ -73,6 +73,7 @@ fn main() -> anyhow::Result<()> {
             tracked: Some(tracked),
             roll_rad: None,
             end_of_row_m: None,
+            crop: "rows",
             warnings: &[],
         };
         p.publish_estimate(&RosEstimate {

@@ -3,7 +3,7 @@
 //! configuration mistakes in `[guidance]` or `[mounting]` are named.
 
 use omnirow::estimate::Estimate;
-use omnirow::guidance::{CropState, TrackState};
+use omnirow::guidance::{headland, CropState, TrackState};
 use std::process::Stdio;
 use std::time::Duration;
 
@@ -245,14 +245,17 @@ fn end_of_the_rows_is_reported_and_the_headland_is_no_crop() {
                 e.seq
             );
             reported += 1;
-        } else if truth > 0.3 {
+        } else if truth > 0.3 && e.seq + 1 >= u64::from(headland::CONFIRM_FRAMES) {
+            // (the first frames confirm it: one frame does not make an end of the rows)
             panic!("frame {}: the end {truth} m ahead not reported", e.seq);
         }
         if t.no_crop {
             assert_ne!(g.crop, CropState::Rows, "frame {}", e.seq);
         }
-        if g.crop == CropState::NoCrop {
-            assert!(g.rows.is_empty() && g.frame.is_none());
+        // a frame that measured nothing claims no row (the published crop follows a frame
+        // later: one frame does not flip it)
+        if g.frame.is_none() {
+            assert!(g.rows.is_empty());
         }
     }
     assert!(reported >= 30, "{reported}");

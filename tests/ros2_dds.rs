@@ -185,6 +185,7 @@ fn guidance(i: u64) -> RosGuidance<'static> {
         tracked: (!lost).then_some(tracked),
         roll_rad: (i % 2 == 0).then_some(0.001 * x),
         end_of_row_m: None,
+        crop: "rows",
         warnings: &[],
     }
 }
@@ -819,7 +820,7 @@ mod node {
         );
         let mut cfg = config(d);
         cfg.image_rate_hz = 5.0;
-        let p = omnirow::ros2::node_publisher(&cfg, "paced test source", [0.0; 2])
+        let p = omnirow::ros2::node_publisher(&cfg, "paced test source", [0.0; 2], None)
             .unwrap()
             .expect("enabled");
         let pipeline = Pipeline::start(
@@ -1082,4 +1083,53 @@ fn check_run_guidance(
         _ => 0,
     };
     assert!(g["level"].as_u64().unwrap() >= level, "{g}");
+}
+
+/// Row guidance's odometry input: a Cyclone DDS peer publishes `nav_msgs/Odometry` on `/odom`
+/// as a robot's wheel odometry would (ROS 2's default QoS: reliable); the node's subscription
+/// hands its speed and yaw rate to the feed guidance reads, stamped on arrival.
+#[test]
+fn odometry_from_a_ros2_peer_reaches_guidance() {
+    use omnirow::guidance::{Guidance, GuidanceOptions, OdometryFeed};
+    use std::sync::Arc;
+    let Some(venv) = venv() else { return };
+    let d = domain(6);
+    let cfg = Ros2Config {
+        odometry_topic: "/odom".to_string(),
+        ..config(d)
+    };
+    let mut p = Ros2Publisher::new(&cfg).unwrap();
+    let feed = Arc::new(OdometryFeed::new());
+    p.subscribe_odometry(&cfg, feed.clone()).unwrap();
+    let mut peer = Command::new(venv.join("bin/python"))
+        .arg(format!("{DIR}/tests/ros2/publish_odometry.py"))
+        .args(["--domain", &d.to_string(), "--topic", "rt/odom"])
+        .args(["--speed", "1.25", "--yaw-rate", "0.1", "--seconds", "60"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .expect("start tests/ros2/publish_odometry.py");
+    let t0 = Instant::now();
+    let mut read = 0;
+    while read < 5 && t0.elapsed() < Duration::from_secs(45) {
+        read += p.poll_odometry();
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let _ = peer.kill();
+    let _ = peer.wait();
+    assert!(read >= 5, "odometry samples read: {read}");
+    assert_eq!(p.counts().odometry_in, read as u64);
+    let o = feed.latest().expect("a sample in the feed");
+    assert_eq!((o.speed_mps, o.yaw_rate_rps), (1.25, 0.1));
+    let age = omnirow::frame::now_ns().abs_diff(o.stamp_ns);
+    assert!(age < 5_000_000_000, "stamped {age} ns ago");
+    // guidance reading the feed predicts with it, and ignores it once stale (0.5 s)
+    let mut g = Guidance::new(GuidanceOptions::default(), Default::default())
+        .unwrap()
+        .with_odometry_feed(feed.clone());
+    let m = g.motion_at(o.stamp_ns + 100_000_000);
+    assert!(m.from_odometry, "{m:?}");
+    assert_eq!((m.speed_mps, m.yaw_rate_rps), (Some(1.25), Some(0.1)));
+    let m = g.motion_at(o.stamp_ns + 2_000_000_000);
+    assert!(!m.from_odometry && m.speed_mps.is_none(), "{m:?}");
 }

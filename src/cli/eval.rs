@@ -78,6 +78,10 @@ pub struct GuidanceArgs {
     /// with `[pipeline] narrow_search = false`).
     #[arg(long)]
     pub no_narrow: bool,
+    /// The drives to run: weaving, crossing, curved_r20, headland, field (all in one drive:
+    /// weaving, the crossing, an empty stretch and the rows' end; for long runs).
+    #[arg(long, value_delimiter = ',', default_values_t = eval::guidance::DEFAULT_DRIVES.map(String::from))]
+    pub drives: Vec<String>,
 }
 
 /// `omnirow eval guidance`.
@@ -88,8 +92,22 @@ fn guidance(a: GuidanceArgs) -> anyhow::Result<ExitCode> {
         a.seconds
     );
     let detector = crate::detect::DetectorOptions::default();
+    let all = eval::guidance::scenarios(a.width, a.height, a.seconds);
+    if let Some(bad) = a
+        .drives
+        .iter()
+        .find(|d| !all.iter().any(|s| s.name == d.as_str()))
+    {
+        anyhow::bail!(
+            "--drives: no drive {bad:?} (there are {})",
+            all.iter().map(|s| s.name).collect::<Vec<_>>().join(", ")
+        );
+    }
     let mut scores = Vec::new();
-    for s in eval::guidance::scenarios(a.width, a.height, a.seconds) {
+    for s in all
+        .into_iter()
+        .filter(|s| a.drives.iter().any(|d| d == s.name))
+    {
         eprintln!("eval guidance: {} ({} frames)", s.name, s.frames);
         scores.push(eval::guidance::run_drive(&s, &detector, !a.no_narrow)?);
     }

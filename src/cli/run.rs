@@ -277,9 +277,16 @@ pub fn run(args: RunArgs, record_to: Option<PathBuf>) -> anyhow::Result<ExitCode
         rec.calibration_toml = Some(cal.to_toml());
         rec.annotate = Some(cal.clone());
     }
+    // Odometry from ROS 2 for guidance's motion model, when both are on.
+    let odometry =
+        (cfg.guidance.is_some() && cfg.ros2.enabled && cfg.ros2.odometry_topic_name().is_some())
+            .then(|| Arc::new(crate::guidance::OdometryFeed::new()));
     if let Some(g) = cfg.guidance {
-        cfg.pipeline.guidance =
-            Some(Guidance::new(g, cal.mounting).context("[guidance] (docs/guidance.md)")?);
+        let mut g = Guidance::new(g, cal.mounting).context("[guidance] (docs/guidance.md)")?;
+        if let Some(feed) = &odometry {
+            g = g.with_odometry_feed(feed.clone());
+        }
+        cfg.pipeline.guidance = Some(g);
     }
     if let Some(n) = cfg.pipeline.narrow_search.as_mut() {
         n.mounting = cal.mounting;
@@ -318,8 +325,9 @@ pub fn run(args: RunArgs, record_to: Option<PathBuf>) -> anyhow::Result<ExitCode
         publishers.push(Box::new(StdoutPublisher::new()));
     }
     let tool_point_m = cfg.guidance.map_or([0.0; 2], |g| g.tool_point_m);
-    if let Some(p) = crate::ros2::node_publisher(&cfg.ros2, &source.describe(), tool_point_m)
-        .context("[ros2] publisher (docs/ros2.md)")?
+    if let Some(p) =
+        crate::ros2::node_publisher(&cfg.ros2, &source.describe(), tool_point_m, odometry)
+            .context("[ros2] publisher (docs/ros2.md)")?
     {
         tracing::info!(
             namespace = %cfg.ros2.namespace,

@@ -2,7 +2,7 @@
 //! row fit on the points, the comb and the tracker — scored against the drives' truth.
 //!
 //! Owns the drives ([`scenarios`]: weaving by ±0.3 spacing, crossing to the next path, a 20 m
-//! radius, the headland), the per-drive scores ([`DriveScore`]: offset, heading and curvature
+//! radius, the headland, and `field`: all of them in one drive, for the long run), the per-drive scores ([`DriveScore`]: offset, heading and curvature
 //! errors, row jumps, the end of the rows' error, empty stretches reported) as a Markdown table,
 //! and one PNG per drive of the offset, truth and estimate over time (drawn with [`super::chart`]).
 
@@ -88,12 +88,29 @@ pub fn scenarios(width: u32, height: u32, seconds: f64) -> Vec<Scenario> {
                 rows_end_m: seconds * 0.6,
                 gap_start_m: seconds * 0.15,
                 gap_length_m: (seconds * 0.25).min(6.0),
+                ..base.clone()
+            },
+            frames,
+        },
+        Scenario {
+            name: "field",
+            drive: SyntheticDriveOptions {
+                // everything in one drive (the long run): weaving, the crossing at a quarter
+                // of the time, an empty stretch from half the way (a tenth of it long, at most
+                // 6 m), the rows' end at 90%
+                cross_at_s: seconds / 4.0,
+                rows_end_m: seconds * 0.9,
+                gap_start_m: seconds * 0.5,
+                gap_length_m: (seconds * 0.1).min(6.0),
                 ..base
             },
             frames,
         },
     ]
 }
+
+/// The drives run unless others are named: all but `field` (which repeats them in one).
+pub const DEFAULT_DRIVES: [&str; 4] = ["weaving", "crossing", "curved_r20", "headland"];
 
 /// What one drive scored.
 #[derive(Debug, Clone, PartialEq)]

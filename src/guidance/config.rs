@@ -25,6 +25,8 @@ pub struct GuidanceConfig {
     pub row_sd_m: f64,
     pub heading_sd_deg: f64,
     pub spacing_tolerance: f64,
+    /// Odometry older than this is ignored (the configured speed is used), seconds.
+    pub odometry_max_age_s: f64,
     /// Forward speed, m/s (0: unknown).
     pub speed_mps: f64,
     pub offset_rate_sd: f64,
@@ -52,6 +54,7 @@ impl Default for GuidanceConfig {
             row_sd_m: o.row_sd_m,
             heading_sd_deg: 0.1, // GuidanceOptions::default().heading_sd_rad in degrees
             spacing_tolerance: o.spacing_tolerance,
+            odometry_max_age_s: o.odometry_max_age_s,
             speed_mps: t.speed_mps,
             offset_rate_sd: t.offset_rate_sd,
             heading_rate_sd: t.heading_rate_sd,
@@ -78,6 +81,7 @@ impl GuidanceConfig {
             row_sd_m: self.row_sd_m,
             heading_sd_rad: self.heading_sd_deg.to_radians(),
             spacing_tolerance: self.spacing_tolerance,
+            odometry_max_age_s: self.odometry_max_age_s,
             tracker: TrackerOptions {
                 speed_mps: self.speed_mps,
                 offset_rate_sd: self.offset_rate_sd,

@@ -14,12 +14,16 @@ pub mod comb;
 pub mod config;
 pub mod followed;
 pub mod ground;
+pub mod headland;
+pub mod motion;
 pub mod rowfit;
 pub mod tracker;
 
 pub use comb::{fit_comb, fit_comb_with_roll, Comb, CombOptions};
 pub use config::GuidanceConfig;
 pub use ground::GroundFrame;
+pub use headland::Headland;
+pub use motion::{Motion, MotionAt, Odometry, OdometryFeed};
 pub use rowfit::{RowFit, RowFitMeasurement, RowFitOptions};
 pub use tracker::{Measurement, TrackState, Tracked, Tracker, TrackerOptions};
 
@@ -71,6 +75,9 @@ pub struct GuidanceOptions {
     /// Relative difference between the measured and the configured spacing (or between the
     /// spacing at opposite offsets) above which a configuration warning is raised.
     pub spacing_tolerance: f64,
+    /// Odometry older than this (against the frame's capture time) is ignored, seconds: the
+    /// configured `speed_mps` is used instead.
+    pub odometry_max_age_s: f64,
     pub tracker: TrackerOptions,
 }
 
@@ -88,6 +95,7 @@ impl Default for GuidanceOptions {
             row_sd_m: 0.003,
             heading_sd_rad: 0.1f64.to_radians(),
             spacing_tolerance: 0.04,
+            odometry_max_age_s: 0.5,
             tracker: TrackerOptions::default(),
         }
     }
@@ -142,6 +150,12 @@ impl GuidanceOptions {
         pos("row_sd_m", self.row_sd_m)?;
         pos("heading_sd_rad", self.heading_sd_rad)?;
         pos("spacing_tolerance", self.spacing_tolerance)?;
+        if !(self.odometry_max_age_s > 0.0 && self.odometry_max_age_s <= 60.0) {
+            return bad(format!(
+                "odometry_max_age_s = {} must lie in (0, 60]",
+                self.odometry_max_age_s
+            ));
+        }
         let t = &self.tracker;
         if !(t.speed_mps.is_finite() && t.speed_mps >= 0.0 && t.speed_mps <= 50.0) {
             return bad(format!("speed_mps = {} must lie in 0..=50", t.speed_mps));
@@ -372,6 +386,15 @@ pub struct Guidance {
     /// The spacing last tracked: the comb's first guess when none is configured (a few far
     /// rows, as at an empty stretch's end, otherwise fit a comb of twice the spacing).
     spacing_hint: Option<f64>,
+    /// The end of the rows and the crop over frames.
+    headland: Headland,
+    /// Odometry and the configured speed.
+    motion: Motion,
+    /// From the camera's foot point to base_link's origin along the rows, metres (the last
+    /// measured frame's).
+    end_shift_m: f64,
+    /// Where odometry arrives from another thread (ROS 2), when subscribed.
+    feed: Option<std::sync::Arc<OdometryFeed>>,
 }
 
 impl Guidance {
@@ -392,11 +415,37 @@ impl Guidance {
             consistency: Consistency::default(),
             tilted: false,
             spacing_hint: None,
+            headland: Headland::new(),
+            motion: Motion::new(opts.tracker.speed_mps, opts.odometry_max_age_s),
+            end_shift_m: 0.0,
+            feed: None,
         })
     }
 
     pub fn options(&self) -> &GuidanceOptions {
         &self.opts
+    }
+
+    /// Keeps an odometry sample for the frames captured within `odometry_max_age_s` of it;
+    /// false (and ignored) when it is not finite.
+    pub fn set_odometry(&mut self, odom: Odometry) -> bool {
+        self.motion.set(odom)
+    }
+
+    /// The robot's motion guidance predicts with for a frame captured at `t_ns`: fresh
+    /// odometry (from the feed too), else the configured speed, else unknown.
+    pub fn motion_at(&mut self, t_ns: u64) -> MotionAt {
+        if let Some(o) = self.feed.as_ref().and_then(|f| f.latest()) {
+            self.motion.set(o);
+        }
+        self.motion.at(t_ns)
+    }
+
+    /// Reads odometry from `feed` (filled by another thread, e.g. the ROS 2 subscription)
+    /// before every frame.
+    pub fn with_odometry_feed(mut self, feed: std::sync::Arc<OdometryFeed>) -> Self {
+        self.feed = Some(feed);
+        self
     }
 
     /// Folds in one frame, in capture order: its capture time, the rows' vanishing point and
@@ -417,12 +466,28 @@ impl Guidance {
         out.frame = None;
         out.roll_rad = None;
         out.end_of_row_m = None;
+        let motion = self.motion_at(t_ns);
+        self.tracker.set_motion(motion.from_odometry.then(|| {
+            (
+                motion.speed_mps.unwrap_or(0.0),
+                motion.yaw_rate_rps.unwrap_or(0.0),
+            )
+        }));
         let measured = vp.and_then(|vp| self.measure(&Vector3::from(vp), normals, curvature, out));
-        out.crop = match (&measured, curvature) {
+        let frame_crop = match (&measured, curvature) {
             (None, _) => CropState::NoCrop,
             (Some(_), Some(f)) if !f.crop_near => CropState::EmptyStretch,
             (Some(_), _) => CropState::Rows,
         };
+        let fit = curvature.filter(|_| measured.is_some());
+        let (end, crop) = self
+            .headland
+            .update(t_ns, frame_crop, fit, motion.speed_mps);
+        out.crop = crop;
+        // from the camera's foot point to base_link's origin, along the rows
+        out.end_of_row_m = end
+            .map(|e| e + self.end_shift_m)
+            .filter(|e| e.abs() <= rowfit::END_RANGE_M);
         let m = measured.map(|(m, _)| m);
         let r = self.tracker.update(t_ns, m.as_ref());
         out.tracking = r.state;
@@ -518,15 +583,20 @@ impl Guidance {
             Mode::OverRow => c,
             Mode::BetweenRows => c + s / 2.0,
         };
-        let offset = -(line - (line / s - 0.5).ceil() * s);
-        // the followed kind's nearest line, left of the camera's foot point
-        let curvature =
-            fit.and_then(|m| Some((m.at_lateral(g.point_lateral_m(&tool) - offset)?, m.sd_per_m)));
-        // from the camera's foot point to base_link's origin, along the rows
-        out.end_of_row_m = fit
-            .and_then(|m| m.end_of_rows_m)
-            .map(|e| e + g.along.dot(&g.camera_m))
-            .filter(|e| e.abs() <= rowfit::END_RANGE_M);
+        let wrap = |e: f64| e - (e / s - 0.5).ceil() * s;
+        let straight = wrap(-line);
+        // the followed kind's nearest line (left of the camera's foot point) is the chord of
+        // a curved row: measured at the tool point on the fitted arc instead
+        let tool_lateral = g.point_lateral_m(&tool);
+        let tool_along = g.along.dot(&(tool - g.camera_m));
+        let fit = fit.filter(|m| m.curvature_per_m.is_some());
+        let offset = match fit {
+            Some(m) => wrap(straight - m.arc_shift_m(tool_lateral - straight, tool_along)),
+            None => straight,
+        };
+        let curvature = fit.and_then(|m| Some((m.at_lateral(tool_lateral - offset)?, m.sd_per_m)));
+        let heading = g.heading_rad();
+        self.end_shift_m = g.along.dot(&g.camera_m);
         let dir = g.along - g.up * g.along.dot(&g.up);
         let dir = dir / dir.norm();
         for (y, k) in self.ys.iter().zip(&self.index) {
@@ -543,7 +613,7 @@ impl Guidance {
         out.roll_rad = roll;
         out.frame = Some(FrameGuidance {
             lateral_offset_m: offset,
-            heading_rad: g.heading_rad(),
+            heading_rad: heading,
             row_spacing_m: s,
             curvature_per_m: curvature.map(|c| c.0),
             comb_rms_m: comb.rms_m,
@@ -558,7 +628,7 @@ impl Guidance {
             Measurement {
                 offset_m: offset,
                 offset_sd_m: comb.offset_sd_m.max(o.row_sd_m / 2.0),
-                heading_rad: g.heading_rad(),
+                heading_rad: heading,
                 heading_sd_rad: o.heading_sd_rad,
                 spacing_m: s,
                 spacing_sd_m: spacing_sd,

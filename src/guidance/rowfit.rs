@@ -37,6 +37,10 @@ pub struct RowFitOptions {
     pub min_points: usize,
     /// Floor of the measurement's standard deviation, 1/m.
     pub min_sd_per_m: f64,
+    /// Largest curvature taken for a measurement, 1/m: a tighter fit (a radius under 5 m
+    /// by default, no crop row's) comes from points that do not pin the arcs down (far rows
+    /// seen across an empty stretch) and is no measurement.
+    pub max_curvature_per_m: f64,
 }
 
 impl Default for RowFitOptions {
@@ -46,6 +50,7 @@ impl Default for RowFitOptions {
             across_m: 2.0,
             min_points: 100,
             min_sd_per_m: 0.001,
+            max_curvature_per_m: 0.2,
         }
     }
 }
@@ -62,11 +67,21 @@ pub struct RowFitMeasurement {
     /// Points in the fit.
     pub points: usize,
     /// Distance ahead along the rows from the camera's foot point to where the rows end,
-    /// metres, when the points show it within [`END_RANGE_M`] (negative: behind, once past).
+    /// metres, when the points show it within [`END_MEASURE_M`] (negative: behind, once
+    /// past): the last plant seen on the rows, with none after it for the bins' reach.
     pub end_of_rows_m: Option<f64>,
     /// Plants are seen on the rows within [`NEAR_M`] along them, ahead or behind (false: an
     /// empty stretch or the headland around the robot, the rows seen only farther away).
     pub crop_near: bool,
+    /// How far the rows' arcs lie to the left of their detected lines (great circles: chords
+    /// over the visible stretch) at the camera's foot point, metres: the rows' own shifts
+    /// `α_i`, averaged with the comb's weights (0 without a fit).
+    #[serde(default)]
+    pub shift_m: f64,
+    /// The arcs' common turn `β` at the camera's foot point: their tangent there runs
+    /// `atan(β)` to the left of the vanishing point's direction (0 without a fit).
+    #[serde(default)]
+    pub turn: f64,
 }
 
 impl RowFitMeasurement {
@@ -74,20 +89,33 @@ impl RowFitMeasurement {
     pub fn at_lateral(&self, lateral_m: f64) -> Option<f64> {
         self.curvature_per_m.map(|k| k / (1.0 - k * lateral_m))
     }
+
+    /// How far the arc of the row-parallel line `lateral_m` to the left of the camera's foot
+    /// point lies to the left of its straight (detected) line, `along_m` ahead of the foot
+    /// point, metres: `shift + β·a + κ_line·a²/2`.
+    pub fn arc_shift_m(&self, lateral_m: f64, along_m: f64) -> f64 {
+        let k = self.at_lateral(lateral_m).unwrap_or(0.0);
+        self.shift_m + self.turn * along_m + k * along_m * along_m / 2.0
+    }
 }
 
 /// Detected lines closer than this across the rows are one row, metres (the detector may
 /// report both edges of a row; rows are at least 0.2 m apart, `min_spacing_m`).
 const MERGE_M: f64 = 0.12;
 
-/// Bins of the rows' points along the rows, ahead and behind, for the end of the rows.
+/// Bins of the rows' points along the rows, ahead and behind, for the end of the rows: 12 m
+/// each way, so that the rows after an empty stretch come into view well before it.
 const END_BIN_M: f64 = 0.2;
-const END_BINS: usize = 40;
+const END_BINS: usize = 60;
 /// The rows end where the points ahead stay below this share of those behind (at the same
-/// distances) over [`END_EMPTY_M`].
+/// distances) over [`END_EMPTY_M`] and no planted bin follows within the bins' reach (one
+/// does: an empty stretch, the rows resume after it).
 const END_RATIO: f64 = 0.15;
 const END_EMPTY_M: f64 = 2.4;
-/// Farthest end of the rows reported, metres ahead (and behind, once past).
+/// Farthest end of the rows measured in one frame, metres ahead (and behind, once past); the
+/// guidance publishes it within [`END_RANGE_M`] and confirms it over frames before that.
+pub const END_MEASURE_M: f64 = 8.0;
+/// Farthest end of the rows published, metres ahead (and behind, once past).
 pub const END_RANGE_M: f64 = 5.0;
 /// Along the rows, ahead and behind, within which plants make [`RowFitMeasurement::crop_near`].
 pub const NEAR_M: f64 = 3.0;
@@ -190,14 +218,18 @@ impl RowFit {
                 None => break,
             }
         }
+        let max_k = self.opts.max_curvature_per_m;
         let mut m = result
             .filter(|m| m.points >= self.opts.min_points)
+            .filter(|m| m.curvature_per_m.is_some_and(|k| k.abs() <= max_k))
             .unwrap_or(RowFitMeasurement {
                 curvature_per_m: None,
                 sd_per_m: f64::INFINITY,
                 points: 0,
                 end_of_rows_m: None,
                 crop_near: false,
+                shift_m: 0.0,
+                turn: 0.0,
             });
         if m.curvature_per_m.is_none() {
             arcs = Arcs::default();
@@ -207,11 +239,12 @@ impl RowFit {
     }
 
     /// The rows' points along them: where they end (the distance ahead of the camera's foot
-    /// point, negative behind, within [`END_RANGE_M`]) and whether any grow within
+    /// point, negative behind, within [`END_MEASURE_M`]) and whether any grow within
     /// [`NEAR_M`]. A bin of the rows counts as planted when its points' ground area reaches
     /// [`END_RATIO`] of the larger of the two bins at the same distance ahead and behind (the
-    /// lens sees both alike) and that larger one is not empty; the rows end where planted
-    /// bins give way to [`END_EMPTY_M`] of unplanted ones.
+    /// lens sees both alike) and that larger one is not empty; the rows end after the last
+    /// planted bin when at least [`END_EMPTY_M`] of unplanted ones follow it to the bins'
+    /// reach. Unplanted bins with planted ones after them are an empty stretch, not the end.
     fn along_the_rows(
         &self,
         frame: &GroundFrame,
@@ -254,11 +287,14 @@ impl RowFit {
         let near = (NEAR_M / END_BIN_M).round() as usize;
         let crop_near = (END_BINS - near..END_BINS + near).any(planted);
         let win = (END_EMPTY_M / END_BIN_M).round() as usize;
-        let reach = (END_RANGE_M / END_BIN_M).round() as usize;
+        let reach = (END_MEASURE_M / END_BIN_M).round() as usize;
         let first = END_BINS.saturating_sub(reach).max(1);
         let last = (END_BINS + reach).min(2 * END_BINS - win);
-        let end = (first..=last)
-            .find(|&i| planted(i - 1) && !(i..i + win).any(planted))
+        // the last planted bin: the rows cannot end before it (an empty stretch ends there)
+        let last_planted = (0..2 * END_BINS).rev().find(|&i| planted(i));
+        let end = last_planted
+            .map(|i| i + 1)
+            .filter(|i| (first..=last).contains(i))
             .map(|i| (i as f64 - END_BINS as f64) * END_BIN_M);
         (end, crop_near)
     }
@@ -369,6 +405,20 @@ impl RowFit {
             let var = ssr / (n - rows - 2.0) * saa / det * CORRELATED_PIXELS;
             let sd = var.sqrt();
             kappa = k;
+            // the rows' own shifts α_i = (Σw·r − β·Σw·a − κ_i/2·Σw·a²)/Σw, with the comb's
+            // weights (1 + (y/h)²)⁻²
+            let h = self.mounting.height_m;
+            let (mut sa, mut sw) = (0.0, 0.0);
+            for (s, &y) in self.sums.iter().zip(&self.lines) {
+                if s[9] < 3.0 || s[0] <= 0.0 {
+                    continue;
+                }
+                let ki = k / (1.0 - k * y);
+                let alpha = (s[5] - beta * s[1] - ki / 2.0 * s[2]) / s[0];
+                let w = (1.0 + (y / h).powi(2)).powi(-2);
+                sa += w * alpha;
+                sw += w;
+            }
             out = Some((
                 Arcs { beta, kappa: k },
                 RowFitMeasurement {
@@ -377,6 +427,8 @@ impl RowFit {
                     points: n as usize,
                     end_of_rows_m: None,
                     crop_near: true,
+                    shift_m: sa / sw,
+                    turn: beta,
                 },
             ));
         }

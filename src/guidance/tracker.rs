@@ -7,8 +7,9 @@
 //! REP 103), `ψ` the rows' heading in the robot frame (radians, counter-clockwise), `κ` the
 //! followed line's curvature (1/m, positive when it bends to the left as the robot drives
 //! forward), `s` the row spacing (metres). Motion model at speed `v` (configured; 0 when
-//! unknown, then the process noise carries the motion): `ė = −v·sin ψ`, `ψ̇ = v·κ`
-//! (the robot's own turning is process noise), `κ̇ = ṡ = 0`.
+//! unknown, then the process noise carries the motion; [`Tracker::set_motion`] gives the
+//! odometry's): `ė = −v·sin ψ`, `ψ̇ = v·κ − ω` with the robot's yaw rate `ω` when odometry
+//! gives it (otherwise its turning is process noise), `κ̇ = ṡ = 0`.
 //!
 //! A frame measures the offset only modulo the spacing (from the nearest comb line); the
 //! tracker unwraps it to the multiple nearest its prediction, so the followed line keeps its
@@ -123,6 +124,9 @@ pub struct Tracker {
     t_ns: u64,
     last_accept_ns: u64,
     rejected_total: u64,
+    /// Speed (m/s) and yaw rate (rad/s) for the next prediction, when given
+    /// ([`Self::set_motion`]); otherwise the configured speed and no yaw rate.
+    motion: Option<(f64, f64)>,
 }
 
 impl Tracker {
@@ -135,7 +139,14 @@ impl Tracker {
             t_ns: 0,
             last_accept_ns: 0,
             rejected_total: 0,
+            motion: None,
         }
+    }
+
+    /// The robot's forward speed (m/s) and yaw rate (rad/s, counter-clockwise) for the
+    /// predictions from now on (e.g. from odometry); `None` returns to the configured speed.
+    pub fn set_motion(&mut self, motion: Option<(f64, f64)>) {
+        self.motion = motion;
     }
 
     pub fn state(&self) -> TrackState {
@@ -247,10 +258,10 @@ impl Tracker {
 
     fn predict(&mut self, dt: f64) {
         let o = &self.opts;
-        let v = o.speed_mps;
+        let (v, w) = self.motion.unwrap_or((o.speed_mps, 0.0));
         let psi = self.x[1];
         self.x[0] -= v * dt * psi.sin();
-        self.x[1] += v * dt * self.x[2];
+        self.x[1] += (v * self.x[2] - w) * dt;
         let mut f = Matrix4::identity();
         f[(0, 1)] = -v * dt * psi.cos();
         f[(1, 2)] = v * dt;
@@ -423,6 +434,16 @@ mod tests {
         let r = t.update(1 + 200_000_000, None);
         let x = r.x.unwrap();
         assert!((x[0] + 0.2 * 0.05f64.sin()).abs() < 1e-9, "{}", x[0]);
+        // odometry: 2 m/s turning left at 0.1 rad/s; the rows turn right in the robot frame
+        t.set_motion(Some((2.0, 0.1)));
+        let before = x;
+        let x = t.update(1 + 300_000_000, None).x.unwrap();
+        assert!(
+            (x[0] - (before[0] - 0.2 * before[1].sin())).abs() < 1e-9,
+            "{}",
+            x[0]
+        );
+        assert!((x[1] - (before[1] + 0.1 * (2.0 * before[2] - 0.1))).abs() < 1e-9);
     }
 
     #[test]

@@ -52,6 +52,10 @@ pub struct Ros2Config {
     pub sigma_deg_at_full_quality: f64,
     /// Frames on `<namespace>/image_raw` per second of capture time; 0 publishes no frames.
     pub image_rate_hz: f64,
+    /// `nav_msgs/Odometry` topic to subscribe to for row guidance's motion model (forward
+    /// speed and yaw rate of `twist`); a relative name lives in `namespace`. Empty: none (the
+    /// configured `[guidance] speed_mps` is used).
+    pub odometry_topic: String,
 }
 
 impl Default for Ros2Config {
@@ -74,6 +78,7 @@ impl Default for Ros2Config {
             },
             sigma_deg_at_full_quality: 1.0,
             image_rate_hz: 0.0,
+            odometry_topic: String::new(),
         }
     }
 }
@@ -177,7 +182,35 @@ impl Ros2Config {
         if !(r.is_finite() && r >= 0.0) {
             return err("image_rate_hz", format!("{r} is not a rate >= 0"));
         }
+        let t = &self.odometry_topic;
+        if !t.is_empty() {
+            let rel = t.strip_prefix('/').unwrap_or(t);
+            for tok in rel.split('/') {
+                if let Err(p) = check_token(tok) {
+                    return err("odometry_topic", format!("{t:?}: {p}"));
+                }
+            }
+        }
         Ok(())
+    }
+
+    /// The odometry topic as (namespace, name), `None` when there is none: `/odom` is
+    /// (`/`, `odom`), `odom` is (`namespace`, `odom`), `/robot/odom` (`/robot`, `odom`).
+    pub fn odometry_topic_name(&self) -> Option<(String, String)> {
+        let t = self.odometry_topic.as_str();
+        if t.is_empty() {
+            return None;
+        }
+        Some(match t.strip_prefix('/') {
+            Some(abs) => match abs.rsplit_once('/') {
+                Some((ns, base)) => (format!("/{ns}"), base.to_string()),
+                None => ("/".to_string(), abs.to_string()),
+            },
+            None => match t.rsplit_once('/') {
+                Some((ns, base)) => (join_ns(&self.namespace, ns), base.to_string()),
+                None => (self.namespace.clone(), t.to_string()),
+            },
+        })
     }
 
     /// The domain id to join: the configured one, else `ROS_DOMAIN_ID`, else 0.
@@ -222,6 +255,15 @@ fn check_token(t: &str) -> Result<(), String> {
     Ok(())
 }
 
+/// The namespace `rel` (relative, no leading '/') inside `ns`.
+fn join_ns(ns: &str, rel: &str) -> String {
+    if ns == "/" {
+        format!("/{rel}")
+    } else {
+        format!("{ns}/{rel}")
+    }
+}
+
 /// An absolute ROS 2 namespace: `/` or `/tok(/tok)*`.
 fn check_namespace(ns: &str) -> Result<(), String> {
     let Some(rest) = ns.strip_prefix('/') else {
@@ -244,6 +286,32 @@ fn check_namespace(ns: &str) -> Result<(), String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn odometry_topic_names_resolve_and_bad_ones_are_named() {
+        let mut c = Ros2Config::default();
+        assert_eq!(c.odometry_topic_name(), None);
+        let name = |c: &mut Ros2Config, t: &str| {
+            c.odometry_topic = t.into();
+            c.odometry_topic_name().unwrap()
+        };
+        assert_eq!(name(&mut c, "/odom"), ("/".into(), "odom".into()));
+        assert_eq!(
+            name(&mut c, "/robot/odom"),
+            ("/robot".into(), "odom".into())
+        );
+        assert_eq!(name(&mut c, "odom"), ("/omnirow".into(), "odom".into()));
+        assert_eq!(
+            name(&mut c, "wheel/odom"),
+            ("/omnirow/wheel".into(), "odom".into())
+        );
+        c.validate().unwrap();
+        for bad in ["/odom/", "//odom", "/1odom", "od om"] {
+            c.odometry_topic = bad.into();
+            let e = c.validate().unwrap_err();
+            assert_eq!(e.key, "odometry_topic", "{bad}: {e}");
+        }
+    }
 
     #[test]
     fn defaults_are_valid_and_match_the_documented_names() {

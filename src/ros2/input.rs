@@ -40,6 +40,8 @@ pub struct RosGuidance<'a> {
     pub roll_rad: Option<f64>,
     /// Distance ahead to the end of the rows, metres; `None`: not seen ending.
     pub end_of_row_m: Option<f64>,
+    /// What crop is in view: `rows`, `empty_stretch` or `no_crop`.
+    pub crop: &'a str,
     /// Configuration warnings: the rows disagree with the configured geometry.
     pub warnings: &'a [Warning],
 }

@@ -3,7 +3,8 @@
 //!
 //! Owns the Rust mirrors of `builtin_interfaces/Time`, `std_msgs/{Header, Float32}`,
 //! `geometry_msgs/{Quaternion, Vector3, Vector3Stamped, Point, Pose, PoseStamped,
-//! PoseWithCovariance, PoseWithCovarianceStamped}`, `nav_msgs/Path`,
+//! PoseWithCovariance, PoseWithCovarianceStamped, Twist, TwistWithCovariance}`,
+//! `nav_msgs/{Path, Odometry}` (Odometry is read, not published),
 //! `sensor_msgs/{Imu, Image}` and `diagnostic_msgs/{KeyValue, DiagnosticStatus,
 //! DiagnosticArray}`, and the [`RosType`] trait that names each one's ROS package and type.
 //! Field order is the wire order: do not reorder.
@@ -195,6 +196,56 @@ pub struct PoseWithCovarianceStamped {
 impl RosType for PoseWithCovarianceStamped {
     const PACKAGE: &'static str = "geometry_msgs";
     const NAME: &'static str = "PoseWithCovarianceStamped";
+}
+
+/// `geometry_msgs/Twist`: linear and angular velocity.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct Twist {
+    pub linear: Vector3,
+    pub angular: Vector3,
+}
+
+impl RosType for Twist {
+    const PACKAGE: &'static str = "geometry_msgs";
+    const NAME: &'static str = "Twist";
+}
+
+/// `geometry_msgs/TwistWithCovariance`: the covariance row-major 6×6 over (vx, vy, vz, wx,
+/// wy, wz).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct TwistWithCovariance {
+    pub twist: Twist,
+    #[serde(with = "fixed_array")]
+    pub covariance: [f64; 36],
+}
+
+impl Default for TwistWithCovariance {
+    fn default() -> Self {
+        TwistWithCovariance {
+            twist: Twist::default(),
+            covariance: [0.0; 36],
+        }
+    }
+}
+
+impl RosType for TwistWithCovariance {
+    const PACKAGE: &'static str = "geometry_msgs";
+    const NAME: &'static str = "TwistWithCovariance";
+}
+
+/// `nav_msgs/Odometry` (omnirow subscribes to it): the pose in `header.frame_id`, the twist
+/// in `child_frame_id` (the robot's base_link).
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct Odometry {
+    pub header: Header,
+    pub child_frame_id: String,
+    pub pose: PoseWithCovariance,
+    pub twist: TwistWithCovariance,
+}
+
+impl RosType for Odometry {
+    const PACKAGE: &'static str = "nav_msgs";
+    const NAME: &'static str = "Odometry";
 }
 
 /// `nav_msgs/Path`: poses in `header.frame_id`, in order along the path.

@@ -10,9 +10,10 @@ use super::config::Ros2Config;
 use super::error::Ros2Error;
 use super::input::{RosEstimate, RosGuidance, RosStatus, TrackedRow};
 use crate::estimate::Estimate;
-use crate::guidance::{GuidanceEstimate, Mode};
+use crate::guidance::{GuidanceEstimate, Mode, OdometryFeed};
 use crate::publish::Publisher;
 use crate::status::StatusSummary;
+use std::sync::Arc;
 
 impl<'a> From<&'a Estimate> for RosEstimate<'a> {
     fn from(e: &'a Estimate) -> Self {
@@ -54,6 +55,7 @@ impl<'a> From<&'a GuidanceEstimate> for RosGuidance<'a> {
             tracked: tracked(g),
             roll_rad: g.roll_rad,
             end_of_row_m: g.end_of_row_m,
+            crop: g.crop.name(),
             warnings: &g.warnings,
         }
     }
@@ -70,6 +72,7 @@ pub(super) struct LatestGuidance {
     tracked: Option<TrackedRow>,
     roll_rad: Option<f64>,
     end_of_row_m: Option<f64>,
+    crop: &'static str,
     warnings: Vec<crate::guidance::Warning>,
 }
 
@@ -84,6 +87,7 @@ impl LatestGuidance {
             self.tracked = tracked(g);
             self.roll_rad = g.roll_rad;
             self.end_of_row_m = g.end_of_row_m;
+            self.crop = g.crop.name();
             self.warnings.extend_from_slice(&g.warnings);
         }
     }
@@ -95,6 +99,7 @@ impl LatestGuidance {
             tracked: self.tracked,
             roll_rad: self.roll_rad,
             end_of_row_m: self.end_of_row_m,
+            crop: self.crop,
             warnings: &self.warnings,
         })
     }
@@ -126,21 +131,28 @@ impl<'a> RosStatus<'a> {
 /// The ROS 2 publisher for the node's publisher list, or `None` when `[ros2]` is disabled.
 /// `hardware_id` names the source in `/diagnostics` (camera model and serial, recording);
 /// `tool_point_m` is the row guidance's (`[guidance] tool_point_m`; `[0, 0]` without
-/// guidance), from which `row_pose` moves the offset to base_link.
+/// guidance), from which `row_pose` moves the offset to base_link. With `odometry` (row
+/// guidance reads it) and `odometry_topic` configured, the node subscribes to odometry there.
 pub fn node_publisher(
     config: &Ros2Config,
     hardware_id: &str,
     tool_point_m: [f64; 2],
+    odometry: Option<Arc<OdometryFeed>>,
 ) -> Result<Option<Box<dyn Publisher>>, Ros2Error> {
     if !config.enabled {
         return Ok(None);
     }
     config.validate()?;
-    build(config, hardware_id, tool_point_m)
+    build(config, hardware_id, tool_point_m, odometry)
 }
 
 #[cfg(not(feature = "ros2"))]
-fn build(_: &Ros2Config, _: &str, _: [f64; 2]) -> Result<Option<Box<dyn Publisher>>, Ros2Error> {
+fn build(
+    _: &Ros2Config,
+    _: &str,
+    _: [f64; 2],
+    _: Option<Arc<OdometryFeed>>,
+) -> Result<Option<Box<dyn Publisher>>, Ros2Error> {
     Err(Ros2Error::NotBuilt)
 }
 
@@ -149,9 +161,13 @@ fn build(
     config: &Ros2Config,
     hardware_id: &str,
     tool_point_m: [f64; 2],
+    odometry: Option<Arc<OdometryFeed>>,
 ) -> Result<Option<Box<dyn Publisher>>, Ros2Error> {
     let mut inner = super::Ros2Publisher::new(config)?;
     inner.set_tool_point(tool_point_m);
+    if let Some(feed) = odometry {
+        inner.subscribe_odometry(config, feed)?;
+    }
     Ok(Some(Box::new(with_feature::NodePublisher {
         inner,
         hardware_id: hardware_id.to_string(),
@@ -336,13 +352,13 @@ mod tests {
     #[test]
     fn disabled_gives_no_publisher_and_a_bad_config_an_error() {
         let off = Ros2Config::default();
-        assert!(node_publisher(&off, "x", [0.0; 2]).unwrap().is_none());
+        assert!(node_publisher(&off, "x", [0.0; 2], None).unwrap().is_none());
         let bad = Ros2Config {
             enabled: true,
             namespace: "no_slash".into(),
             ..Ros2Config::default()
         };
-        let e = node_publisher(&bad, "x", [0.0; 2]).err().unwrap();
+        let e = node_publisher(&bad, "x", [0.0; 2], None).err().unwrap();
         assert!(e.to_string().contains("ros2.namespace"), "{e}");
     }
 
@@ -353,7 +369,7 @@ mod tests {
             enabled: true,
             ..Ros2Config::default()
         };
-        let e = node_publisher(&on, "x", [0.0; 2]).err().unwrap();
+        let e = node_publisher(&on, "x", [0.0; 2], None).err().unwrap();
         assert!(e.to_string().contains("--features ros2"), "{e}");
     }
 }

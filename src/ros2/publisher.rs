@@ -23,21 +23,29 @@
 //!
 //! The `row_*` topics carry the row guidance's tracked estimate; a frame without one (guidance
 //! lost or disabled) publishes nothing on them.
+//!
+//! With `odometry_topic` set, the node also subscribes to `nav_msgs/msg/Odometry` there
+//! (reliable or best-effort writers alike: the reader is best effort, keep last 5) and hands
+//! the latest twist to row guidance ([`Ros2Publisher::subscribe_odometry`]).
 
 use super::config::{QosConfig, Reliability, Ros2Config};
 use super::convert::{ImageThrottle, MessageBuilder};
 use super::error::Ros2Error;
 use super::input::{RosEstimate, RosGuidance, RosStatus};
 use super::msg::{
-    DiagnosticArray, Float32, Image, Imu, Path, PoseWithCovarianceStamped, RosType, Vector3Stamped,
+    DiagnosticArray, Float32, Image, Imu, Odometry, Path, PoseWithCovarianceStamped, RosType,
+    Vector3Stamped,
 };
 use crate::frame::ImageView;
+use crate::guidance::OdometryFeed;
 use ros2_client::dds::rustdds::DomainParticipantBuilder;
 use ros2_client::qos::{Durability, History, WhenFull};
 use ros2_client::{
-    Context, MessageTypeName, Name, Node, NodeName, NodeOptions, Publisher, QosProfile, WriteError,
+    Context, MessageTypeName, Name, Node, NodeName, NodeOptions, Publisher, QosProfile,
+    Subscription, WriteError,
 };
 use serde::Serialize;
+use std::sync::Arc;
 
 /// A topic this node publishes, as ROS 2 names it.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -65,6 +73,15 @@ pub struct PublishCounts {
     pub row_follow: u64,
     /// Samples a reliable writer refused because its send window was full.
     pub would_block: u64,
+    /// `nav_msgs/Odometry` samples received (and handed to guidance when finite).
+    pub odometry_in: u64,
+}
+
+/// The odometry subscription and where its samples go.
+struct OdometryIn {
+    subscription: Subscription<Odometry>,
+    feed: Arc<OdometryFeed>,
+    topic: String,
 }
 
 /// A typed writer and the topic it writes.
@@ -84,6 +101,7 @@ pub struct Ros2Publisher {
     row_heading_error: Writer<Float32>,
     diagnostics: Writer<DiagnosticArray>,
     image: Option<Writer<Image>>,
+    odometry: Option<OdometryIn>,
     builder: MessageBuilder,
     throttle: ImageThrottle,
     counts: PublishCounts,
@@ -176,6 +194,7 @@ impl Ros2Publisher {
             row_heading_error,
             diagnostics,
             image,
+            odometry: None,
             builder: MessageBuilder::new(config),
             throttle: ImageThrottle::new(config.image_rate_hz),
             counts: PublishCounts::default(),
@@ -222,10 +241,89 @@ impl Ros2Publisher {
         self.builder = self.builder.clone().with_tool_point(tool_point_m);
     }
 
+    /// Subscribes to `nav_msgs/Odometry` on `config.odometry_topic` (nothing when it is
+    /// empty); each sample's forward speed (`twist.linear.x`) and yaw rate (`twist.angular.z`)
+    /// go to `feed`, stamped with the wall clock when it is read ([`Self::poll_odometry`]):
+    /// guidance judges staleness by arrival, not by the sender's clock.
+    pub fn subscribe_odometry(
+        &mut self,
+        config: &Ros2Config,
+        feed: Arc<OdometryFeed>,
+    ) -> Result<(), Ros2Error> {
+        let Some((ns, base)) = config.odometry_topic_name() else {
+            return Ok(());
+        };
+        let full = config.odometry_topic.clone();
+        let name = Name::new(&ns, &base)
+            .map_err(|e| format!("{e:?}"))
+            .map_err(create_err(format!("topic name {full}")))?;
+        let qos = QosProfile::subscription_default()
+            .reliability_best_effort()
+            .durability(Durability::Volatile)
+            .history(History::KeepLast { depth: 5 });
+        let topic = self
+            .node
+            .create_topic(
+                &name,
+                MessageTypeName::new(Odometry::PACKAGE, Odometry::NAME),
+                &qos,
+            )
+            .map_err(|e| e.to_string())
+            .map_err(create_err(format!("topic {full}")))?;
+        let subscription = self
+            .node
+            .create_subscription::<Odometry>(&topic, None)
+            .map_err(|e| e.to_string())
+            .map_err(create_err(format!("subscription on {full}")))?;
+        tracing::info!(topic = %full, "row guidance reads odometry");
+        self.odometry = Some(OdometryIn {
+            subscription,
+            feed,
+            topic: full,
+        });
+        Ok(())
+    }
+
+    /// Reads the odometry samples that arrived and hands the latest to guidance; the number
+    /// read.
+    pub fn poll_odometry(&mut self) -> usize {
+        let Some(o) = &self.odometry else {
+            return 0;
+        };
+        let mut latest = None;
+        let mut n = 0;
+        loop {
+            match o.subscription.take() {
+                Ok(Some((m, _))) => {
+                    n += 1;
+                    latest = Some(m);
+                }
+                Ok(None) => break,
+                Err(e) => {
+                    tracing::debug!(topic = %o.topic, "odometry: {e:?}");
+                    break;
+                }
+            }
+        }
+        if let Some(m) = latest {
+            let odom = crate::guidance::Odometry {
+                stamp_ns: crate::frame::now_ns(),
+                speed_mps: m.twist.twist.linear.x,
+                yaw_rate_rps: m.twist.twist.angular.z,
+            };
+            if odom.speed_mps.is_finite() && odom.yaw_rate_rps.is_finite() {
+                o.feed.put(odom);
+            }
+        }
+        self.counts.odometry_in += n as u64;
+        n
+    }
+
     /// Publishes one frame's estimate: `orientation` and `heading_tilt` when it has heading
     /// and tilt, the `row_*` topics when its guidance has a tracked estimate. Returns whether
-    /// the frame had heading and tilt.
+    /// the frame had heading and tilt. Reads the odometry that arrived first.
     pub fn publish_estimate(&mut self, e: &RosEstimate) -> Result<bool, Ros2Error> {
+        self.poll_odometry();
         self.publish_rows(e)?;
         let (Some(imu), Some(ht)) = (self.builder.imu(e)?, self.builder.heading_tilt(e)?) else {
             return Ok(false);
@@ -284,6 +382,7 @@ impl Ros2Publisher {
         guidance: Option<&RosGuidance>,
         now_ns: u64,
     ) -> Result<(), Ros2Error> {
+        self.poll_odometry();
         let d = self.builder.diagnostics(s, guidance, now_ns)?;
         if send(&self.diagnostics, d, &mut self.counts.would_block)? {
             self.counts.diagnostics += 1;

@@ -229,6 +229,16 @@ impl MessageBuilder {
         };
         values.push(kv("roll_rad", opt(g.roll_rad, 5, "unobserved")));
         values.push(kv("end_of_row_m", opt(g.end_of_row_m, 2, "not seen")));
+        values.push(kv("crop", g.crop.to_string()));
+        if let Some(e) = g.end_of_row_m {
+            message = format!("{message}; rows end {e:.1} m ahead");
+        }
+        if g.crop != "rows" {
+            // an empty stretch or no crop in view: what the controller steers by is far
+            // away, or nothing
+            level = level.max(DiagnosticStatus::WARN);
+            message = format!("{message}; crop: {}", g.crop);
+        }
         let warnings: Vec<&str> = g.warnings.iter().map(|w| w.name()).collect();
         values.push(kv("warnings", warnings.join(",")));
         if !warnings.is_empty() {
@@ -275,6 +285,7 @@ mod tests {
             tracked: t,
             roll_rad: None,
             end_of_row_m: None,
+            crop: "rows",
             warnings: &[],
         }
     }
@@ -440,7 +451,21 @@ mod tests {
         assert_eq!(get(&s, "row_index").as_deref(), Some("0"));
         assert_eq!(get(&s, "roll_rad").as_deref(), Some("unobserved"));
         assert_eq!(get(&s, "warnings").as_deref(), Some(""));
+        assert_eq!(get(&s, "crop").as_deref(), Some("rows"));
+        assert_eq!(get(&s, "end_of_row_m").as_deref(), Some("not seen"));
         assert!(s.message.contains("offset -0.031 m"), "{}", s.message);
+        // the rows end ahead, then the robot is in an empty stretch: WARN, said in the message
+        let mut g2 = g;
+        g2.end_of_row_m = Some(3.1249);
+        let s = b.guidance_status(&g2, "");
+        assert_eq!(s.level, DiagnosticStatus::OK);
+        assert_eq!(get(&s, "end_of_row_m").as_deref(), Some("3.12"));
+        assert!(s.message.contains("rows end 3.1 m ahead"), "{}", s.message);
+        g2.crop = "empty_stretch";
+        let s = b.guidance_status(&g2, "");
+        assert_eq!(s.level, DiagnosticStatus::WARN);
+        assert_eq!(get(&s, "crop").as_deref(), Some("empty_stretch"));
+        assert!(s.message.ends_with("crop: empty_stretch"), "{}", s.message);
 
         g.tracking = "coasting";
         assert_eq!(b.guidance_status(&g, "").level, DiagnosticStatus::WARN);
