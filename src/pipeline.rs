@@ -86,7 +86,8 @@ pub struct PipelineOptions {
     pub poll_timeout: Duration,
     /// Row guidance, run by the publisher on each estimate in frame order.
     pub guidance: Option<Guidance>,
-    /// With row guidance: the tracker's prediction narrows the next frames' search.
+    /// With row guidance: the tracker's prediction narrows the next frames' search (off by
+    /// default: the answers then depend on timing, see docs/guidance.md).
     pub narrow_search: Option<NarrowSearch>,
 }
 
@@ -201,7 +202,7 @@ impl RawPipeline {
             100.0,
         );
         let options = PipelineOptions {
-            narrow_search: c.get(&self.narrow_search, true).then_some(NarrowSearch {
+            narrow_search: c.get(&self.narrow_search, false).then_some(NarrowSearch {
                 min_window_rad: min_window_deg.to_radians(),
                 sigmas,
                 ..NarrowSearch::new(Mounting::default())
