@@ -10,6 +10,7 @@ pub mod detector;
 pub mod edge;
 pub mod hough;
 pub mod mask;
+pub mod options;
 pub mod overlay;
 pub mod pencil;
 pub mod pose;

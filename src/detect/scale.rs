@@ -21,8 +21,8 @@
 //! either way) make a finer image of the same lens split its wide rows into narrow cells and
 //! lose them (tests/detect_scale.rs).
 
-use super::detector::{Binning, DetectorOptions};
 use super::hough::{REFERENCE_BINS, REFERENCE_MERGE_ANGLE_DEG, REFERENCE_MIN_TOLERANCE_DEG};
+use super::options::{Binning, DetectorOptions, REFERENCE_PAIR_MAX_DEG};
 use super::vanishing::{
     REFERENCE_AZIMUTH_BINS, REFERENCE_ELEVATION_BIN_DEG, REFERENCE_INLIER_DEG,
     REFERENCE_MIN_SPREAD_DEG,
@@ -176,7 +176,7 @@ pub fn resolve(
         .get_or_insert(angle(REFERENCE_MIN_SPREAD_DEG));
     o.combined
         .pair_max_deg
-        .get_or_insert(angle(super::detector::REFERENCE_PAIR_MAX_DEG));
+        .get_or_insert(angle(REFERENCE_PAIR_MAX_DEG));
     o.pencil
         .polish_max_band_deg
         .get_or_insert(angle(super::pencil::REFERENCE_POLISH_MAX_BAND_DEG));

@@ -12,6 +12,11 @@ use super::{GuidanceEstimate, Mode};
 use crate::camera::Calibration;
 use nalgebra::Vector3;
 
+/// Colour of the followed line wherever it is drawn (the HTTP overlay, Foxglove annotations):
+/// cyan, distinct from the rows' red, blue, magenta and orange, the vanishing point's yellow
+/// and the crop's green.
+pub const FOLLOWED_COLOUR: [u8; 3] = [0, 230, 255];
+
 /// A line on the ground, base_link coordinates, metres.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct GroundLine {

@@ -10,13 +10,11 @@
 //! guidance is coasting on its prediction): the page says which.
 
 use crate::camera::Calibration;
+/// The followed line's colour, defined with the followed line itself.
+pub use crate::guidance::followed::FOLLOWED_COLOUR;
 use crate::guidance::followed::{followed_lines, sample_ground_line, GroundLine};
 use crate::guidance::GuidanceEstimate;
 use crate::status::Latest;
-
-/// Colour of the followed line (cyan: distinct from the rows' red, blue, magenta and orange,
-/// the vanishing point's yellow and the crop's green).
-pub const FOLLOWED_COLOUR: [u8; 3] = [0, 230, 255];
 
 /// Draws `g`'s followed line (solid) and the rows either side of a followed path (dashed)
 /// into `rgb` (width × height × 3, the image `cal` describes). Returns how many samples of the

@@ -13,8 +13,7 @@
 use crate::camera::Calibration;
 use crate::detect::overlay::{method_colour, VP_COLOUR};
 use crate::estimate::Estimate;
-use crate::guidance::followed::{followed_lines, sample_ground_line, GroundLine};
-use crate::publish::overlay::FOLLOWED_COLOUR;
+use crate::guidance::followed::{followed_lines, sample_ground_line, GroundLine, FOLLOWED_COLOUR};
 use crate::sphere::any_perpendicular;
 use nalgebra::Vector3;
 use std::fmt::Write;
