@@ -876,7 +876,7 @@ impl Outlet {
             estimate,
         };
         if let Some(previous) = sh.replace_latest(latest) {
-            self.release.frame(previous.frame);
+            self.release.frame(previous);
         }
     }
 

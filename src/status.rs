@@ -63,7 +63,7 @@ pub struct Shared {
     source_state: Mutex<SourceState>,
     recording: Mutex<String>,
     samples: Mutex<Samples>,
-    latest: Mutex<Option<Latest>>,
+    latest: Mutex<Option<Arc<Latest>>>,
     /// Last loop time of each thread, ns since `started` (0 = finished).
     heartbeats: Mutex<Vec<(&'static str, u64)>>,
     rates: Mutex<Rates>,
@@ -89,14 +89,20 @@ const SAMPLE_WINDOW: usize = 1024;
 /// A thread that has not looped for this long counts as stuck.
 const STUCK_AFTER: Duration = Duration::from_secs(5);
 
-fn percentile(v: &VecDeque<f64>, p: f64) -> f64 {
-    if v.is_empty() {
+/// The `p` quantile of `sorted` (ascending); 0 when empty.
+fn percentile(sorted: &[f64], p: f64) -> f64 {
+    if sorted.is_empty() {
         return 0.0;
     }
-    let mut s: Vec<f64> = v.iter().copied().collect();
-    s.sort_by(f64::total_cmp);
-    let i = ((p * (s.len() - 1) as f64).round() as usize).min(s.len() - 1);
-    s[i]
+    let i = ((p * (sorted.len() - 1) as f64).round() as usize).min(sorted.len() - 1);
+    sorted[i]
+}
+
+/// `v` copied and sorted ascending.
+fn sorted(v: Vec<f64>) -> Vec<f64> {
+    let mut v = v;
+    v.sort_by(f64::total_cmp);
+    v
 }
 
 /// Locks a mutex, recovering the data if a thread panicked while holding it.
@@ -219,7 +225,10 @@ impl Shared {
         lock(&self.source_error).clone()
     }
 
-    pub fn latest(&self) -> Option<Latest> {
+    /// The latest published frame, shared: a reader holds the lock only to clone a pointer
+    /// (the readers are the HTTP service's low-priority threads; one preempted while it
+    /// cloned rows under the lock would hold up the publisher).
+    pub fn latest(&self) -> Option<Arc<Latest>> {
         lock(&self.latest).clone()
     }
 
@@ -229,7 +238,18 @@ impl Shared {
             let r = lock(&self.rates);
             (r.fps_in, r.fps_out)
         };
-        let s = lock(&self.samples);
+        // Copy the samples out and sort them after the lock is released: the readers are the
+        // HTTP service's low-priority threads, and a reader preempted while it sorted under
+        // the lock would hold up the publisher, which samples every frame.
+        let (detector_ms, latency_ms, status_counts) = {
+            let s = lock(&self.samples);
+            (
+                s.detector_ms.iter().copied().collect::<Vec<f64>>(),
+                s.latency_ms.iter().copied().collect::<Vec<f64>>(),
+                s.status_counts.clone(),
+            )
+        };
+        let (detector_ms, latency_ms) = (sorted(detector_ms), sorted(latency_ms));
         StatusSummary {
             uptime_s: self.started.elapsed().as_secs_f64(),
             frames_in: self.frames_in.load(Ordering::Relaxed),
@@ -239,14 +259,14 @@ impl Shared {
             detector_errors: self.detector_errors.load(Ordering::Relaxed),
             fps_in,
             fps_out,
-            detector_p50_ms: percentile(&s.detector_ms, 0.5),
-            detector_p99_ms: percentile(&s.detector_ms, 0.99),
-            latency_p50_ms: percentile(&s.latency_ms, 0.5),
-            latency_p99_ms: percentile(&s.latency_ms, 0.99),
+            detector_p50_ms: percentile(&detector_ms, 0.5),
+            detector_p99_ms: percentile(&detector_ms, 0.99),
+            latency_p50_ms: percentile(&latency_ms, 0.5),
+            latency_p99_ms: percentile(&latency_ms, 0.99),
             source_state: self.source_state(),
             recording: lock(&self.recording).clone(),
             recorded_frames: self.recorded_frames.load(Ordering::Relaxed),
-            status_counts: s.status_counts.clone(),
+            status_counts,
         }
     }
 
@@ -323,9 +343,14 @@ impl Shared {
             .or_default() += 1;
     }
 
-    /// Makes `latest` the latest published frame; returns the one it replaces.
-    pub(crate) fn replace_latest(&self, latest: Latest) -> Option<Latest> {
-        lock(&self.latest).replace(latest)
+    /// Makes `latest` the latest published frame; returns the frame it replaces (for its
+    /// buffer to go back to the source once no reader holds it).
+    pub(crate) fn replace_latest(&self, latest: Latest) -> Option<Arc<Frame>> {
+        let previous = lock(&self.latest).replace(Arc::new(latest));
+        previous.map(|p| match Arc::try_unwrap(p) {
+            Ok(l) => l.frame,
+            Err(p) => p.frame.clone(),
+        })
     }
 
     pub(crate) fn set_recording(&self, state: String) {

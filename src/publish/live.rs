@@ -46,7 +46,7 @@ impl StatusDocument {
             healthy,
             pipeline_alive: alive,
             summary,
-            latest: shared.latest().map(|l| l.estimate),
+            latest: shared.latest().map(|l| l.estimate.clone()),
         }
     }
 }
@@ -97,7 +97,7 @@ impl History {
 
     /// Records the latest estimate if it is new, and forgets the points older than the window.
     pub fn sample(&self, shared: &Shared) {
-        let Some(e) = shared.latest().map(|l| l.estimate) else {
+        let Some(e) = shared.latest().map(|l| l.estimate.clone()) else {
             return;
         };
         self.push(&e, self.started.elapsed().as_secs_f64());
