@@ -3,7 +3,10 @@
 # as possible, end-to-end latency at 15 fps, peak RSS with and without recording, and
 # recording throughput at 15 fps, and the pipeline's latency with the HTTP service under load.
 # Usage: scripts/measure-node.sh [WORKDIR]; OMNIROW_MEASURE_ONLY=http runs only the HTTP
-# section (after the recording it replays), OMNIROW_MEASURE_HTTP_PAIRS=N its pairs (3).
+# section (after the recording it replays), OMNIROW_MEASURE_HTTP_PAIRS=N its pairs (3),
+# OMNIROW_MEASURE_HTTP_CLIENT_NICE=N the load client's niceness (0; 19 stands in for a scraper
+# on another machine: the client then takes only the CPU time the node leaves),
+# OMNIROW_MEASURE_HTTP_SECONDS=S how long each load lasts (10; a p99 over 10 s is ~150 frames).
 # Needs a release build (cargo build --release), GNU time (/usr/bin/time) and python3.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -47,12 +50,15 @@ fi
 
 # The HTTP service under load (docs/http.md): pairs of 12 s replays at 15 fps with the service
 # on, one without a client and one while a client fetches /metrics 200 times a second for 10 s
+# (both lengths grow with OMNIROW_MEASURE_HTTP_SECONDS)
 # (a new connection each time, as a scraper without keep-alive; from when /healthz first
 # answers), in turn (A B A B ...) so that the machine's drift hits both alike. Per run, the p99
 # of the end-to-end latency of the frames received after the first second; per pair, the
 # difference and the ratio loaded / idle; at the end their medians.
 PORT=${OMNIROW_MEASURE_HTTP_PORT:-18347}
 PAIRS=${OMNIROW_MEASURE_HTTP_PAIRS:-3}
+LOAD_S=${OMNIROW_MEASURE_HTTP_SECONDS:-10}
+RUN_S=$((LOAD_S + 2))
 sed '/^\[http\]/,$d' "$W/full.toml" > "$W/http.toml"
 printf '[http]\nlisten = "127.0.0.1:%s"\n' "$PORT" >> "$W/http.toml"
 load() {
@@ -105,12 +111,13 @@ PY
 }
 : > "$W/http-pairs.txt"
 for pair in $(seq "$PAIRS"); do
-  $B run --replay "$F" --loop --duration 12 --print --config "$W/http.toml" \
+  $B run --replay "$F" --loop --duration "$RUN_S" --print --config "$W/http.toml" \
     >"$W/http-idle-$pair.jsonl" 2>"$W/http-idle-$pair.log" || true
   # The client runs on the node's cores at the same priority as the pipeline (a scraper is
   # usually another machine): its own CPU time counts against the service here.
-  load 200 10 >"$W/http-load-$pair.txt" &
-  $B run --replay "$F" --loop --duration 12 --print --config "$W/http.toml" \
+  (renice -n "${OMNIROW_MEASURE_HTTP_CLIENT_NICE:-0}" -p "$BASHPID" >/dev/null; load 200 "$LOAD_S") \
+    >"$W/http-load-$pair.txt" &
+  $B run --replay "$F" --loop --duration "$RUN_S" --print --config "$W/http.toml" \
     >"$W/http-load-$pair.jsonl" 2>"$W/http-load-$pair.log" || true
   wait
   read -r idle n_idle idle50 < <(window_p99 "$W/http-idle-$pair.jsonl")
