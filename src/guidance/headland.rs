@@ -239,6 +239,7 @@ mod tests {
             crop_near: near,
             shift_m: 0.0,
             turn: 0.0,
+            shift_sd_m: 0.0,
         }
     }
 

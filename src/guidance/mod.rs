@@ -627,7 +627,12 @@ impl Guidance {
         Some((
             Measurement {
                 offset_m: offset,
-                offset_sd_m: comb.offset_sd_m.max(o.row_sd_m / 2.0),
+                // the arc's shift under the camera adds its own uncertainty: large across
+                // an empty stretch, where the arcs are extrapolated from rows farther away
+                offset_sd_m: comb
+                    .offset_sd_m
+                    .max(o.row_sd_m / 2.0)
+                    .hypot(fit.map_or(0.0, |m| m.shift_sd_m)),
                 heading_rad: heading,
                 heading_sd_rad: o.heading_sd_rad,
                 spacing_m: s,

@@ -82,6 +82,11 @@ pub struct RowFitMeasurement {
     /// `atan(β)` to the left of the vanishing point's direction (0 without a fit).
     #[serde(default)]
     pub turn: f64,
+    /// The standard deviation of [`shift_m`](Self::shift_m), metres: small when plants grow
+    /// beside the camera, large when the arcs are extrapolated under it from rows seen only
+    /// farther away (an empty stretch); 0 without a fit.
+    #[serde(default)]
+    pub shift_sd_m: f64,
 }
 
 impl RowFitMeasurement {
@@ -230,6 +235,7 @@ impl RowFit {
                 crop_near: false,
                 shift_m: 0.0,
                 turn: 0.0,
+                shift_sd_m: 0.0,
             });
         if m.curvature_per_m.is_none() {
             arcs = Arcs::default();
@@ -402,23 +408,10 @@ impl RowFit {
             // plant are not independent errors, so the variance is inflated by the pixels a
             // plant spans (about CORRELATED_PIXELS)
             let ssr = (srr - beta * sar - k * sqr).max(0.0);
-            let var = ssr / (n - rows - 2.0) * saa / det * CORRELATED_PIXELS;
-            let sd = var.sqrt();
+            let var_unit = ssr / (n - rows - 2.0) * CORRELATED_PIXELS;
+            let sd = (var_unit * saa / det).sqrt();
             kappa = k;
-            // the rows' own shifts α_i = (Σw·r − β·Σw·a − κ_i/2·Σw·a²)/Σw, with the comb's
-            // weights (1 + (y/h)²)⁻²
-            let h = self.mounting.height_m;
-            let (mut sa, mut sw) = (0.0, 0.0);
-            for (s, &y) in self.sums.iter().zip(&self.lines) {
-                if s[9] < 3.0 || s[0] <= 0.0 {
-                    continue;
-                }
-                let ki = k / (1.0 - k * y);
-                let alpha = (s[5] - beta * s[1] - ki / 2.0 * s[2]) / s[0];
-                let w = (1.0 + (y / h).powi(2)).powi(-2);
-                sa += w * alpha;
-                sw += w;
-            }
+            let shift = self.shifts(beta, k, var_unit, [saa, saq, sqq], det);
             out = Some((
                 Arcs { beta, kappa: k },
                 RowFitMeasurement {
@@ -427,12 +420,46 @@ impl RowFit {
                     points: n as usize,
                     end_of_rows_m: None,
                     crop_near: true,
-                    shift_m: sa / sw,
+                    shift_m: shift.0,
                     turn: beta,
+                    shift_sd_m: shift.1,
                 },
             ));
         }
         out
+    }
+
+    /// The rows' own shifts `α_i = (Σw·r − β·Σw·a − κ_i/2·Σw·a²)/Σw`, averaged with the comb's
+    /// weights `(1 + (y/h)²)⁻²`, and that mean's standard deviation: each row's mean residual
+    /// (`var_unit / Σw`) and the common turn and curvature's covariance (`var_unit·M⁻¹`, `m`
+    /// the normal matrix's `[aa, aq, qq]`, `det` its determinant) carried to the camera's foot
+    /// point, where the rows' points may lie far away.
+    fn shifts(&self, beta: f64, k: f64, var_unit: f64, m: [f64; 3], det: f64) -> (f64, f64) {
+        let h = self.mounting.height_m;
+        let (mut sa, mut sw, mut noise) = (0.0, 0.0, 0.0);
+        let (mut ga, mut gq) = (0.0, 0.0);
+        for (s, &y) in self.sums.iter().zip(&self.lines) {
+            if s[9] < 3.0 || s[0] <= 0.0 {
+                continue;
+            }
+            let g = 1.0 / (1.0 - k * y);
+            let alpha = (s[5] - beta * s[1] - k * g / 2.0 * s[2]) / s[0];
+            let w = (1.0 + (y / h).powi(2)).powi(-2);
+            sa += w * alpha;
+            sw += w;
+            noise += w * w / s[0];
+            // ∂α_i/∂β = −mean(a), ∂α_i/∂κ = −g·mean(a²)/2
+            ga += w * s[1] / s[0];
+            gq += w * g / 2.0 * s[2] / s[0];
+        }
+        if sw <= 0.0 {
+            return (0.0, 0.0);
+        }
+        let (ga, gq) = (ga / sw, gq / sw);
+        let [aa, aq, qq] = m;
+        let var = var_unit
+            * (noise / (sw * sw) + (ga * ga * qq - 2.0 * ga * gq * aq + gq * gq * aa) / det);
+        (sa / sw, var.max(0.0).sqrt())
     }
 }
 
@@ -445,14 +472,18 @@ mod tests {
 
     /// Renders a field of curvature `k`, runs the detector and the fit: the measurement.
     fn measured(k: f64, lateral: f64, yaw_deg: f64) -> RowFitMeasurement {
-        let cal = ideal_fisheye(512, 612).unwrap();
-        let opts = SynthOptions {
+        measured_with(SynthOptions {
             curvature_per_m: k,
             lateral_m: lateral,
             yaw_deg,
             plant_distance_m: 0.05,
             ..Default::default()
-        };
+        })
+    }
+
+    /// Renders `opts`' field, runs the detector and the fit: the measurement.
+    fn measured_with(opts: SynthOptions) -> RowFitMeasurement {
+        let cal = ideal_fisheye(512, 612).unwrap();
         let (img, truth) = render(&cal, &opts, 3).unwrap();
         let frame = img.into_frame(0, truth);
         let mut det = Detector::new(&cal, DetectorOptions::default()).unwrap();
@@ -487,6 +518,71 @@ mod tests {
         }
         let m = measured(0.0, 0.25, 0.0);
         assert!(m.curvature_per_m.unwrap().abs() < 0.002, "{m:?}");
+    }
+
+    /// Plants on four arcs of curvature `k` (0.5 m apart, straddling the camera) at the
+    /// distances along the rows in `along` (metres, 5 cm apart), jittered by up to ±1 cm,
+    /// seen by a camera looking straight down; the rows' lines are the arcs' chords over the
+    /// stretch seen. The fit's measurement.
+    fn measured_on_arcs(k: f64, along: [f64; 2]) -> RowFitMeasurement {
+        let mounting = Mounting::default();
+        let h = mounting.height_m;
+        let camera_from_robot = mounting.robot_from_camera().inverse();
+        let (mut rays, mut normals) = (Vec::new(), Vec::new());
+        let n = ((along[1] - along[0]) / 0.05) as usize;
+        let mean_a2 = (0..=n)
+            .map(|j| (along[0] + 0.05 * j as f64).powi(2))
+            .sum::<f64>()
+            / (n + 1) as f64;
+        for (i, y) in [-0.75, -0.25, 0.25, 0.75].into_iter().enumerate() {
+            for j in 0..=n {
+                let a = along[0] + 0.05 * j as f64;
+                let jitter = 0.01 * ((i * 131 + j * 17) as f64 * 0.618).fract() * 2.0 - 0.01;
+                let l = y + k * a * a / 2.0 + jitter;
+                let ray = camera_from_robot * Vector3::new(a, l, -h).normalize();
+                rays.push([ray.x as f32, ray.y as f32, ray.z as f32]);
+            }
+            // the chord's plane: through the camera, along x, at y + k·mean(a²)/2
+            let chord = y + k * mean_a2 / 2.0;
+            normals.push(
+                (camera_from_robot * Vector3::new(0.0, h, chord))
+                    .normalize()
+                    .into(),
+            );
+        }
+        let weights = vec![1.0f32; rays.len()];
+        let vp: [f64; 3] = (camera_from_robot * Vector3::x()).into();
+        let mut fit = RowFit::new(mounting, RowFitOptions::default());
+        fit.measure(&vp, normals, &rays, &weights).expect("a fit")
+    }
+
+    #[test]
+    fn the_shift_is_loose_when_the_plants_near_the_robot_are_few() {
+        let k = 0.01;
+        let full = measured_on_arcs(k, [-6.0, 6.0]);
+        // the robot at the end of an empty stretch: the rows resume just ahead
+        let ahead = measured_on_arcs(k, [1.0, 8.0]);
+        for m in [&full, &ahead] {
+            assert!(m.crop_near && m.curvature_per_m.is_some(), "{m:?}");
+        }
+        // with plants all around the camera the arcs pin the shift to millimetres; from
+        // plants only ahead it is extrapolated back under the camera and says so
+        assert!(full.shift_sd_m > 0.0 && full.shift_sd_m < 0.003, "{full:?}");
+        assert!(
+            ahead.shift_sd_m > 4.0 * full.shift_sd_m,
+            "{full:?} {ahead:?}"
+        );
+        // and both shifts are within their uncertainty of the truth: the chords lie
+        // k·mean(a²)/2 to the left of the arcs' foot points
+        let truth = |a: [f64; 2]| -k * (a[1].powi(3) - a[0].powi(3)) / (a[1] - a[0]) / 6.0;
+        for (m, a) in [(&full, [-6.0, 6.0]), (&ahead, [1.0, 8.0])] {
+            let err = m.shift_m - truth(a);
+            assert!(
+                err.abs() < 3.0 * m.shift_sd_m + 0.003,
+                "{m:?} vs {}",
+                truth(a)
+            );
+        }
     }
 
     #[test]
