@@ -227,3 +227,60 @@ fn crdld_first_images_are_scored() {
         assert!(v["labelled_rows"].as_u64().unwrap() >= 1, "{v}");
     }
 }
+
+/// Pooled recall, precision and the mean row-position score of a run's outcomes.
+fn pooled(o: &[serde_json::Value]) -> (f64, f64, f64) {
+    let scored: Vec<_> = o.iter().filter(|v| v["score"].is_f64()).collect();
+    let sum = |k: &str| scored.iter().map(|v| v[k].as_f64().unwrap()).sum::<f64>();
+    let found = sum("matched_rows");
+    (
+        found / sum("labelled_rows"),
+        found / sum("inside_rows"),
+        sum("score") / scored.len() as f64,
+    )
+}
+
+#[test]
+fn crdld_default_method_holds_on_every_tenth_image() {
+    let Some(d) = crdld() else { return };
+    // every 10th image (50, from all the set's field conditions), linked into a folder
+    let sub = Path::new(env!("CARGO_TARGET_TMPDIR")).join("crdld_every_tenth");
+    let _ = std::fs::remove_dir_all(&sub);
+    for kind in ["image", "label"] {
+        std::fs::create_dir_all(sub.join(kind)).unwrap();
+        for n in (0..500).step_by(10) {
+            let name = format!("{n}.jpg");
+            std::os::unix::fs::symlink(d.join(kind).join(&name), sub.join(kind).join(&name))
+                .unwrap();
+        }
+    }
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut scores = Vec::new();
+    for f in ["300", "900"] {
+        let out = sub.join(format!("out{f}"));
+        let calib = root.join(format!("config/calib/pinhole_512_f{f}.toml"));
+        let run = eval_real(&sub, &calib, &out, &[]);
+        let stdout = String::from_utf8_lossy(&run.stdout);
+        assert!(
+            run.status.success(),
+            "{}",
+            String::from_utf8_lossy(&run.stderr)
+        );
+        // the default picks the pencil for a perspective camera
+        assert!(stdout.contains("(method pencil, by auto"), "{stdout}");
+        let o = outcomes(&out);
+        assert!(o.iter().all(|v| v["error"].is_null()));
+        let (recall, precision, score) = pooled(&o);
+        // measured 0.320 / 0.456 / 0.285 at f = 300 px (the combined method, the default
+        // before: 0.307 / 0.241 / 0.213)
+        if f == "300" {
+            assert!(
+                recall >= 0.29 && precision >= 0.40 && score >= 0.26,
+                "{stdout}"
+            );
+        }
+        scores.push(score);
+    }
+    // two focal-length guesses 3x apart give nearly the same score (measured 0.285, 0.294)
+    assert!((scores[0] - scores[1]).abs() <= 0.05, "{scores:?}");
+}

@@ -20,7 +20,8 @@ pub struct DetectArgs {
     /// OCamCalib calib_results.txt or omnirow TOML calibration.
     #[arg(long, value_name = "FILE")]
     pub calib: PathBuf,
-    /// Row-detection method [default: the configuration's, else combined].
+    /// Row-detection method [default: the configuration's, else auto: pencil for a
+    /// perspective camera's narrow field of view, combined for an omnidirectional lens].
     #[arg(long, value_enum)]
     pub method: Option<MethodArg>,
     /// Take the detector's options from the `[detector]` section of this node
@@ -45,6 +46,7 @@ pub enum MethodArg {
     Edge,
     Combined,
     Pencil,
+    Auto,
 }
 
 impl From<MethodArg> for Method {
@@ -54,6 +56,7 @@ impl From<MethodArg> for Method {
             MethodArg::Edge => Method::Edge,
             MethodArg::Combined => Method::Combined,
             MethodArg::Pencil => Method::Pencil,
+            MethodArg::Auto => Method::Auto,
         }
     }
 }
@@ -149,8 +152,9 @@ pub fn run(args: DetectArgs) -> anyhow::Result<ExitCode> {
     if let Some(m) = args.method {
         opts.method = m.into();
     }
-    let method: Method = opts.method;
     let mut detector = Detector::new(&cal, opts)?;
+    // the method that runs: `auto` resolved for the calibration
+    let method: Method = detector.options().method;
     if let Some(dir) = &args.overlay {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("cannot create overlay folder {}", dir.display()))?;

@@ -174,8 +174,11 @@ pub fn run(a: EvalArgs) -> anyhow::Result<ExitCode> {
             "hough" => Ok(Method::Hough),
             "combined" => Ok(Method::Combined),
             "pencil" => Ok(Method::Pencil),
+            "auto" => Ok(Method::Auto),
             other => {
-                anyhow::bail!("--methods: unknown method '{other}' (edge, hough, combined, pencil)")
+                anyhow::bail!(
+                    "--methods: unknown method '{other}' (edge, hough, combined, pencil, auto)"
+                )
             }
         })
         .collect::<anyhow::Result<_>>()?;

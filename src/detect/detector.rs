@@ -585,10 +585,11 @@ impl Detector {
         prior: Option<&DetectorPrior>,
         out: &mut Detection,
     ) -> Result<(), DetectError> {
-        let window = match prior {
-            Some(p) if self.opts.method != Method::Pencil => Some((p.validate()?, p.window_rad)),
-            _ => None,
-        };
+        // a bad prior is an error whichever method runs (the pencil ignores a good one)
+        let checked = prior
+            .map(|p| p.validate().map(|v| (v, p.window_rad)))
+            .transpose()?;
+        let window = checked.filter(|_| self.opts.method != Method::Pencil);
         let t0 = Instant::now();
         self.last_prepare = self.prep.run(view, &mut self.points)?;
         let t1 = Instant::now();
@@ -632,12 +633,17 @@ impl Detector {
         t1: Instant,
         edge: bool,
     ) -> Result<(), DetectError> {
-        let method = self.opts.method;
-        out.rows.clear();
-        self.last_hough = HoughResult::default();
         self.last_pencil = PencilResult::default();
-        if method == Method::Pencil {
-            self.run_pencil(out)?;
+        if self.opts.method == Method::Pencil {
+            // the combined method's vanishing point, one more candidate for the pencil's
+            let seed = if self.opts.pencil.seed_with_combined {
+                self.detect_with(Method::Combined, out, t0, t1, edge)?;
+                out.vanishing_point.map(|v| v.direction)
+            } else {
+                None
+            };
+            out.rows.clear();
+            self.run_pencil(seed, out)?;
             let t2 = Instant::now();
             self.times = StageTimes {
                 prepare: t1 - t0,
@@ -647,6 +653,21 @@ impl Detector {
             };
             return Ok(());
         }
+        self.detect_with(self.opts.method, out, t0, t1, edge)
+    }
+
+    /// The Hough, edge or combined `method`'s rows and vanishing point (as
+    /// [`Self::detect_prepared`]).
+    fn detect_with(
+        &mut self,
+        method: Method,
+        out: &mut Detection,
+        t0: Instant,
+        t1: Instant,
+        edge: bool,
+    ) -> Result<(), DetectError> {
+        out.rows.clear();
+        self.last_hough = HoughResult::default();
         if method != Method::Edge {
             self.last_hough =
                 self.hough
@@ -706,7 +727,7 @@ impl Detector {
             self.consensus(out)?;
         }
         if method != Method::Hough && self.opts.combined.precision_weighting {
-            self.refit_by_precision(out);
+            self.refit_by_precision(method, out);
         }
         if method == Method::Hough && self.opts.refit.precision_weights {
             self.refit_hough_by_precision(out);
@@ -749,12 +770,12 @@ impl Detector {
 
     /// The combined method's final fit: the vote's vanishing point refitted over its inlier
     /// rows with each method weighted by its measured precision ([`precision_fit`]).
-    fn refit_by_precision(&mut self, out: &mut Detection) {
+    fn refit_by_precision(&mut self, method: Method, out: &mut Detection) {
         let Some(vp) = out.vanishing_point else {
             return;
         };
         let floor = self.opts.combined.precision_floor_mrad * 1e-3;
-        let paired = self.opts.method == Method::Combined
+        let paired = method == Method::Combined
             && self.opts.combined.pair_edge_rows
             && pair_edge_rows(
                 &out.rows,
@@ -896,11 +917,16 @@ impl Detector {
     /// profile how evenly spaced its rows are. The candidate whose contrast times that
     /// quality times the comb's contrast (to `pencil.comb_power`) is highest wins: a wrong candidate that lines up one strong
     /// structure sharply gives rows that do not agree once refitted.
-    fn run_pencil(&mut self, out: &mut Detection) -> Result<(), DetectError> {
+    fn run_pencil(
+        &mut self,
+        seed: Option<Vector3<f64>>,
+        out: &mut Detection,
+    ) -> Result<(), DetectError> {
         let p = &self.points;
         let scales = self.pencil.prepare(&p.rays, &p.weights, &p.pixel_rad)?;
+        let seeds = seed.as_slice();
         self.pencil
-            .candidates(&p.rays, &p.weights, &[], &mut self.pencil_candidates);
+            .candidates(&p.rays, &p.weights, seeds, &mut self.pencil_candidates);
         let mut best: Option<(f64, usize)> = None;
         for k in 0..self.pencil_candidates.len() {
             let c = self.pencil_candidates[k];
@@ -1079,8 +1105,31 @@ mod tests {
     use crate::detect::edge::EdgeOptions;
 
     #[test]
-    fn combined_is_default_and_weight_is_checked() {
-        assert_eq!(DetectorOptions::default().method, Method::Combined);
+    fn auto_is_default_and_resolves_by_the_lens() {
+        assert_eq!(DetectorOptions::default().method, Method::Auto);
+        // an omnidirectional lens keeps the paper's combined method
+        let fisheye = ideal_fisheye(100, 120).unwrap();
+        let d = Detector::new(&fisheye, DetectorOptions::default()).unwrap();
+        assert_eq!(d.options().method, Method::Combined);
+        // a forward-looking perspective camera gets the pencil
+        let pinhole = crate::camera::Calibration::parse_toml(
+            include_str!("../../config/calib/pinhole_512_f300.toml"),
+            std::path::Path::new("pinhole_512_f300.toml"),
+        )
+        .unwrap();
+        let d = Detector::new(&pinhole, DetectorOptions::default()).unwrap();
+        assert_eq!(d.options().method, Method::Pencil);
+        // an explicit method is kept whatever the lens
+        let hough = DetectorOptions {
+            method: Method::Hough,
+            ..Default::default()
+        };
+        let d = Detector::new(&pinhole, hough).unwrap();
+        assert_eq!(d.options().method, Method::Hough);
+    }
+
+    #[test]
+    fn weight_is_checked() {
         let cal = ideal_fisheye(100, 120).unwrap();
         for w in [0.0, 1.0, -0.5, f64::NAN] {
             let e = Detector::new(

@@ -58,6 +58,7 @@ impl Method {
             Method::Edge => "edge",
             Method::Combined => "combined",
             Method::Pencil => "pencil",
+            Method::Auto => "auto",
         }
     }
 }
@@ -94,6 +95,11 @@ pub enum Method {
     /// Rows as the peaks of the vegetation across the pencil of great circles through the
     /// vanishing point that makes them sharpest ([`pencil`]).
     Pencil,
+    /// An option only, never a row's method: the method for the calibration's lens,
+    /// resolved when the detector is built ([`scale::resolve`]): `pencil` for a field of
+    /// view narrower than [`scale::NARROW_EXTENT_RAD`] (a forward-looking perspective
+    /// camera), `combined` otherwise (the omnidirectional lenses of the paper).
+    Auto,
 }
 
 /// A row: the great circle where its plane cuts the unit sphere.

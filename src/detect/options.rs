@@ -32,6 +32,9 @@ pub enum Binning {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct DetectorOptions {
+    /// The row-detection method. Default `auto`: the one for the calibration's lens
+    /// (pencil for a perspective camera's narrow field of view, combined for an
+    /// omnidirectional lens; [`Method::Auto`]).
     pub method: Method,
     /// Largest expected tilt of the robot (degrees): bounds the sky mask and the search for
     /// the vanishing point.
@@ -127,7 +130,7 @@ impl Default for CombinedOptions {
 impl Default for DetectorOptions {
     fn default() -> Self {
         DetectorOptions {
-            method: Method::Combined,
+            method: Method::Auto,
             max_tilt_deg: 15.0,
             angle_scale: None,
             binning: Binning::Auto,

@@ -16,7 +16,7 @@ pub fn method_colour(m: Method) -> [u8; 3] {
     match m {
         Method::Hough => [255, 32, 32],
         Method::Edge => [40, 90, 255],
-        Method::Combined => [255, 0, 255],
+        Method::Combined | Method::Auto => [255, 0, 255],
         Method::Pencil => [255, 160, 0],
     }
 }

@@ -84,6 +84,11 @@ pub struct PencilOptions {
     /// Candidate vanishing points are ranked by their contrast times the comb's contrast
     /// (floored at 0.05) to this power: the right point gives evenly spaced rows.
     pub comb_power: f64,
+    /// Also weigh the combined method's vanishing point (Hough and edge rows, found on the
+    /// same points first) as a candidate. It costs the combined method's time and is the
+    /// better candidate on many real images, where the profile alone is sharpest along a
+    /// shadow or the far field (docs/real.md). Default true.
+    pub seed_with_combined: bool,
 }
 
 /// Step of the comb's reference angles (degrees), before two halvings around the best.
@@ -119,7 +124,7 @@ impl Default for PencilOptions {
             refine_iterations: 3,
             max_tan: 4.0,
             candidates: 4,
-            coverage_power: 2.0,
+            coverage_power: 1.0,
             polish: true,
             polish_max_band_deg: None,
             comb: true,
@@ -128,6 +133,7 @@ impl Default for PencilOptions {
             comb_weak_prominence: 0.1,
             comb_max_roll_deg: 20.0,
             comb_power: 0.0,
+            seed_with_combined: true,
         }
     }
 }

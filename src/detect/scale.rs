@@ -27,7 +27,7 @@ use super::vanishing::{
     REFERENCE_AZIMUTH_BINS, REFERENCE_ELEVATION_BIN_DEG, REFERENCE_INLIER_DEG,
     REFERENCE_MIN_SPREAD_DEG,
 };
-use super::DetectError;
+use super::{DetectError, Method};
 use crate::camera::Calibration;
 use std::fmt::Write;
 
@@ -140,6 +140,23 @@ pub struct Scales {
 /// `opts` with every angular option left absent set for `cal`: its reference value times
 /// the factor (`opts.angle_scale`, else derived from the calibration's field of view),
 /// accumulator sizes rounded to whole cells. Options given explicitly are kept.
+/// Fields of view narrower than this extent (radians, the square root of the solid angle:
+/// about a 115° × 115° perspective view) get the pencil method under `method = "auto"`,
+/// wider ones the combined method. Forward-looking perspective cameras see the rows
+/// converge in front of them, where the pencil's profile around the vanishing point holds
+/// on real crop images; the omnidirectional lenses see them all around and keep the
+/// paper's combined method (docs/real.md).
+pub const NARROW_EXTENT_RAD: f64 = 2.0;
+
+/// The method `auto` stands for on a field of view of `a`'s extent.
+pub fn auto_method(a: &AngularResolution) -> Method {
+    if a.extent_rad < NARROW_EXTENT_RAD {
+        Method::Pencil
+    } else {
+        Method::Combined
+    }
+}
+
 pub fn resolve(
     cal: &Calibration,
     opts: &DetectorOptions,
@@ -160,6 +177,9 @@ pub fn resolve(
     let bins = |reference: usize| ((reference as f64 / factor).round() as usize).max(4);
     let angle = |reference: f64| reference * factor;
     let mut o = opts.clone();
+    if o.method == Method::Auto {
+        o.method = auto_method(&resolution);
+    }
     let h = &mut o.hough;
     h.phi_bins.get_or_insert(bins(REFERENCE_BINS));
     h.theta_bins.get_or_insert(bins(REFERENCE_BINS));
@@ -198,6 +218,7 @@ pub fn resolve(
 /// of the angular options, each angular option in force in degrees and pixels and each pixel
 /// option in degrees, at the median resolution.
 pub fn scales_report(cal: &Calibration, opts: &DetectorOptions) -> Result<String, DetectError> {
+    let auto = opts.method == Method::Auto;
     let (opts, sc) = resolve(cal, opts)?;
     let a = sc.resolution;
     let p = a.median_px_per_rad;
@@ -222,6 +243,23 @@ pub fn scales_report(cal: &Calibration, opts: &DetectorOptions) -> Result<String
         "field of view: {:.3} sr, an extent of {:.3} rad",
         a.extent_rad * a.extent_rad,
         a.extent_rad
+    ));
+    line(format!(
+        "method {}{}",
+        opts.method.name(),
+        if auto {
+            let side = if a.extent_rad < NARROW_EXTENT_RAD {
+                "below"
+            } else {
+                "at least"
+            };
+            format!(
+                " (auto: the field of view's extent {:.3} rad is {side} {NARROW_EXTENT_RAD} rad)",
+                a.extent_rad
+            )
+        } else {
+            " (the configuration's)".into()
+        }
     ));
     line(format!(
         "angle_scale {:.4} ({}): angular options absent from the configuration are their \

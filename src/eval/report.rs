@@ -35,7 +35,7 @@ fn colour(m: Method) -> [u8; 3] {
     match m {
         Method::Edge => [30, 80, 220],
         Method::Hough => [220, 40, 40],
-        Method::Combined => [20, 150, 60],
+        Method::Combined | Method::Auto => [20, 150, 60],
         Method::Pencil => [230, 140, 0],
     }
 }

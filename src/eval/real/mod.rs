@@ -105,7 +105,9 @@ impl RealOutcome {
 #[derive(Debug, Clone)]
 pub struct RealResults {
     pub outcomes: Vec<RealOutcome>,
+    /// The method that ran (`auto` resolved for the calibration) and the one asked for.
     pub method: Method,
+    pub requested: Method,
 }
 
 /// The image files of a folder in natural order (2.jpg before 10.jpg).
@@ -209,7 +211,8 @@ pub fn run(
     }
     Ok(RealResults {
         outcomes,
-        method: opts.detector.method,
+        method: detector.options().method,
+        requested: opts.detector.method,
     })
 }
 

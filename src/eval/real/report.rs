@@ -5,7 +5,7 @@
 
 use super::{labels, Decoded, RealEvalOptions, RealOutcome, RealResults};
 use crate::detect::overlay::draw_overlay;
-use crate::detect::{Detection, Row, VanishingPoint};
+use crate::detect::{Detection, Method, Row, VanishingPoint};
 use crate::eval::report::ReportError;
 use crate::eval::stats::quantile;
 use nalgebra::Vector3;
@@ -111,8 +111,13 @@ pub fn markdown(r: &RealResults, command: &str, worst_n: usize) -> String {
     let mut md = String::new();
     let _ = writeln!(
         md,
-        "# omnirow eval real\n\nProduced by `{command}` (method {}). Metrics: docs/real.md.\n",
-        r.method.name()
+        "# omnirow eval real\n\nProduced by `{command}` (method {}{}). Metrics: docs/real.md.\n",
+        r.method.name(),
+        if r.requested == Method::Auto && r.method != Method::Auto {
+            ", by auto for this calibration"
+        } else {
+            ""
+        }
     );
     let _ = writeln!(
         md,
