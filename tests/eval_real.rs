@@ -271,16 +271,16 @@ fn crdld_default_method_holds_on_every_tenth_image() {
         let o = outcomes(&out);
         assert!(o.iter().all(|v| v["error"].is_null()));
         let (recall, precision, score) = pooled(&o);
-        // measured 0.320 / 0.456 / 0.285 at f = 300 px (the combined method, the default
+        // measured 0.328 / 0.426 / 0.296 at f = 300 px (the combined method, the default
         // before: 0.307 / 0.241 / 0.213)
         if f == "300" {
             assert!(
-                recall >= 0.29 && precision >= 0.40 && score >= 0.26,
+                recall >= 0.30 && precision >= 0.38 && score >= 0.27,
                 "{stdout}"
             );
         }
         scores.push(score);
     }
-    // two focal-length guesses 3x apart give nearly the same score (measured 0.285, 0.294)
+    // two focal-length guesses 3x apart give nearly the same score (measured 0.296, 0.314)
     assert!((scores[0] - scores[1]).abs() <= 0.05, "{scores:?}");
 }

@@ -53,7 +53,11 @@ pub struct PencilOptions {
     pub refine_iterations: usize,
     /// Rows are taken within |tan ψ| ≤ this (lateral offset over camera height).
     pub max_tan: f64,
-    /// Candidate vanishing points refined and checked (the grid's strongest local maxima).
+    /// Candidate vanishing points refined and checked: the grid's strongest local maxima,
+    /// and the seeds (the combined method's, `seed_with_combined`) whatever their contrast.
+    /// Default 1: the candidates are ranked by contrast times the rows' agreement on their
+    /// vanishing point, which on real images picks a wrong local maximum more often the more
+    /// there are (docs/real.md).
     pub candidates: usize,
     /// The contrast is multiplied by (weight of the points the profile holds / weight of
     /// all points) to this power. Points beyond the vanishing point (above the horizon it
@@ -123,7 +127,7 @@ impl Default for PencilOptions {
             max_rows: 12,
             refine_iterations: 3,
             max_tan: 4.0,
-            candidates: 4,
+            candidates: 1,
             coverage_power: 1.0,
             polish: true,
             polish_max_band_deg: None,
@@ -536,6 +540,9 @@ impl PencilRows {
             }
         }
         self.grid = grid;
+        self.starts.sort_unstable_by(|a, b| b.0.total_cmp(&a.0));
+        self.starts.truncate(self.opts.candidates.max(1));
+        // the seeds are candidates whatever their contrast
         for s in seeds {
             let (az, el) = self.az_el(s);
             if az.abs() <= az_max && el.abs() <= self.max_tilt {
@@ -544,8 +551,6 @@ impl PencilRows {
                 evaluated += 1;
             }
         }
-        self.starts.sort_unstable_by(|a, b| b.0.total_cmp(&a.0));
-        self.starts.truncate(self.opts.candidates.max(1));
         for k in 0..self.starts.len() {
             let (c, az, el) = self.starts[k];
             let (c, az, el, n) = self.climb(c, az, el, step0, rays, weights, stride);
