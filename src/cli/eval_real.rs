@@ -34,6 +34,12 @@ pub struct RealArgs {
     /// Score only the first N images (in natural order: 2.jpg before 10.jpg).
     #[arg(long, value_name = "N")]
     pub limit: Option<usize>,
+    /// Run each image as N frames of a robot standing still through the node's tracker, the
+    /// search narrowed by its prediction (`[pipeline] narrow_search = true`), and score the
+    /// last frame: what the tracker does to a single image's answer. The pencil method
+    /// ignores the narrowing. 0: one frame, no tracker.
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    pub track: usize,
     /// How many of the worst images get an overlay and a line in the report.
     #[arg(long, value_name = "N", default_value_t = 12)]
     pub worst: usize,
@@ -55,6 +61,7 @@ pub fn run(a: RealArgs) -> anyhow::Result<ExitCode> {
         tracing: MaskTracing::default(),
         score: ScoreOptions::default(),
         limit: a.limit,
+        track_frames: a.track,
     };
     let bar = indicatif::ProgressBar::new(0).with_style(
         indicatif::ProgressStyle::with_template(

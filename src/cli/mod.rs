@@ -34,7 +34,7 @@ pub enum Command {
     /// Detect rows, their vanishing point, heading and tilt in images (one JSON line each).
     Detect(detect::DetectArgs),
     /// Regenerate the paper's evaluation on synthetic images: tables and plots.
-    Eval(eval::EvalArgs),
+    Eval(Box<eval::EvalArgs>),
     /// Check the node's configuration file, or print the documented defaults.
     #[command(subcommand)]
     Config(config::ConfigCommand),
@@ -65,7 +65,7 @@ pub fn main() -> anyhow::Result<ExitCode> {
         Command::Calib(c) => calib::run(c),
         Command::Synth(a) => synth::run(*a),
         Command::Detect(a) => detect::run(a),
-        Command::Eval(a) => eval::run(a),
+        Command::Eval(a) => eval::run(*a),
         Command::Config(c) => config::run(c),
         // The node sets up logging from its configuration.
         Command::Run(a) => run::run(*a, None),

@@ -16,7 +16,9 @@ pub use score::{ImageScore, ProjectedRow, ScoreOptions};
 
 use crate::camera::Calibration;
 use crate::detect::{DetectError, Detection, Detector, DetectorOptions, Method};
-use crate::frame::{ImageView, PixelFormat};
+use crate::estimate::Estimate;
+use crate::frame::{Frame, ImageView, PixelFormat};
+use crate::guidance::{Guidance, GuidanceOptions, RowFit, RowFitOptions};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -49,6 +51,10 @@ pub struct RealEvalOptions {
     pub score: ScoreOptions,
     /// Score only the first N images (natural order).
     pub limit: Option<usize>,
+    /// 0: each image is one frame. N > 0: each image is N frames of a robot standing still,
+    /// through the node's tracker with the search narrowed by its prediction (as
+    /// `[pipeline] narrow_search = true`); the last frame is scored.
+    pub track_frames: usize,
 }
 
 /// What happened on one image.
@@ -216,6 +222,57 @@ pub fn run(
     })
 }
 
+/// Runs `img` as `n` frames at 15 fps of a robot standing still through `detector`, the row
+/// fit and a fresh tracker, each frame's search narrowed by the tracker's prediction as the
+/// node's pipeline does ([`crate::pipeline::NarrowSearch`]); `det` holds the last frame's
+/// detection. Returns `n`.
+fn detect_tracked(
+    cal: &Calibration,
+    detector: &mut Detector,
+    det: &mut Detection,
+    img: &Decoded,
+    n: usize,
+) -> Result<usize, String> {
+    let mut guidance =
+        Guidance::new(GuidanceOptions::default(), cal.mounting).map_err(|e| e.to_string())?;
+    let mut fit = RowFit::new(cal.mounting, RowFitOptions::default());
+    let narrow = crate::pipeline::NarrowSearch::new(cal.mounting);
+    let mut frame = Frame {
+        seq: 0,
+        capture_ns: 0,
+        receive_ns: 0,
+        width: img.width,
+        height: img.height,
+        format: img.format,
+        data: img.data.clone(),
+        truth: None,
+    };
+    let (mut prior, mut tilt) = (None, 0.0);
+    for k in 0..n {
+        frame.seq = k as u64;
+        frame.capture_ns = k as u64 * 66_666_667;
+        frame.receive_ns = frame.capture_ns;
+        let view = frame.view().map_err(|e| e.to_string())?;
+        detector
+            .process_with_prior(&view, prior.as_ref(), det)
+            .map_err(|e| e.to_string())?;
+        let mut est = Estimate::from_detection(&frame, det, 0.0, 0.3);
+        if let Some(vp) = det.vanishing_point {
+            let p = detector.points();
+            est.row_fit = fit.measure(
+                &vp.direction.into(),
+                det.rows.iter().map(|r| r.normal.into()),
+                &p.rays,
+                &p.weights,
+            );
+        }
+        est.apply_guidance(&mut guidance);
+        tilt = est.tilt_rad.unwrap_or(tilt);
+        prior = narrow.prior(&est, tilt);
+    }
+    Ok(n)
+}
+
 /// Detects and scores one image into `o`; an error names what was wrong.
 fn score_one(
     opts: &RealEvalOptions,
@@ -246,9 +303,16 @@ fn score_one(
     detector
         .preparer_mut()
         .refind_fov(&view)
-        .and_then(|_| detector.process(&view, det))
         .map_err(|e| format!("{}: {e}", path.display()))?;
-    o.detect_ms = t0.elapsed().as_secs_f64() * 1e3;
+    let frames = match opts.track_frames {
+        0 => detector
+            .process(&view, det)
+            .map(|_| 1)
+            .map_err(|e| e.to_string()),
+        n => detect_tracked(&opts.calibration, detector, det, &img, n),
+    }
+    .map_err(|e| format!("{}: {e}", path.display()))?;
+    o.detect_ms = t0.elapsed().as_secs_f64() * 1e3 / frames as f64;
     let cal = detector
         .view_calibration()
         .ok_or_else(|| "the detector has no calibration for the image".to_string())?;
