@@ -219,6 +219,11 @@ impl SyntheticDrive {
             samples: 2,
             curvature_per_m: opts.curvature_per_m,
             rows_end_m: (opts.rows_end_m > 0.0).then_some(opts.rows_end_m),
+            // the field reaches past the rows' end (the headland's bare ground beyond it is
+            // part of the field), however far along it lies
+            field_half_length_m: SynthOptions::default()
+                .field_half_length_m
+                .max(opts.rows_end_m + 60.0),
             gap_m: (opts.gap_length_m > 0.0)
                 .then_some([opts.gap_start_m, opts.gap_start_m + opts.gap_length_m]),
             ..SynthOptions::default()
@@ -386,5 +391,18 @@ mod tests {
             headings.windows(2).any(|w| w[0] != w[1]),
             "the heading varies"
         );
+    }
+
+    #[test]
+    fn a_long_drive_stays_in_the_field_until_the_rows_end() {
+        // rows ending 500 m along: the robot 300 s (300 m) in still sees crop, 510 m in not
+        let o = SyntheticDriveOptions {
+            fps: 1.0,
+            rows_end_m: 500.0,
+            ..opts()
+        };
+        let mut d = SyntheticDrive::new(o).unwrap();
+        assert!(!d.frame_at(300).unwrap().truth.unwrap().no_crop);
+        assert!(d.frame_at(510).unwrap().truth.unwrap().no_crop);
     }
 }
