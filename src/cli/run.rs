@@ -209,15 +209,7 @@ impl Processor for DetectorWorker {
     }
 
     fn row_fit(&mut self, det: &Detection) -> Option<RowFitMeasurement> {
-        let fit = self.1.as_mut()?;
-        let vp = det.vanishing_point?.direction;
-        let p = self.0.points();
-        fit.measure(
-            &vp.into(),
-            det.rows.iter().map(|r| r.normal.into()),
-            &p.rays,
-            &p.weights,
-        )
+        self.1.as_mut()?.measure_detection(det, self.0.points())
     }
 }
 

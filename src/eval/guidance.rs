@@ -192,15 +192,7 @@ pub fn run_drive(
         det.process_with_prior(&view, prior.as_ref(), &mut d)
             .map_err(|e| fail(e.to_string()))?;
         let mut est = Estimate::from_detection(&frame, &d, 0.0, 0.3);
-        if let Some(vp) = d.vanishing_point {
-            let p = det.points();
-            est.row_fit = fit.measure(
-                &vp.direction.into(),
-                d.rows.iter().map(|r| r.normal.into()),
-                &p.rays,
-                &p.weights,
-            );
-        }
+        est.row_fit = fit.measure_detection(&d, det.points());
         est.apply_guidance(&mut guidance);
         if let Some(n) = &narrow {
             tilt = est.tilt_rad.unwrap_or(tilt);

@@ -23,6 +23,7 @@
 
 use super::GroundFrame;
 use crate::camera::Mounting;
+use crate::detect::{Detection, Points};
 use nalgebra::{Rotation3, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -158,6 +159,22 @@ impl RowFit {
             lines: Vec::with_capacity(64),
             sums: Vec::with_capacity(64),
         }
+    }
+
+    /// [`Self::measure`] on a detection and the detector's points: `None` without a
+    /// vanishing point.
+    pub fn measure_detection(
+        &mut self,
+        det: &Detection,
+        points: &Points,
+    ) -> Option<RowFitMeasurement> {
+        let vp = det.vanishing_point?.direction;
+        self.measure(
+            &vp.into(),
+            det.rows.iter().map(|r| r.normal.into()),
+            &points.rays,
+            &points.weights,
+        )
     }
 
     /// The curvature from the vanishing point `vp` and the rows' plane normals (camera frame)

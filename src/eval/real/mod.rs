@@ -257,15 +257,7 @@ fn detect_tracked(
             .process_with_prior(&view, prior.as_ref(), det)
             .map_err(|e| e.to_string())?;
         let mut est = Estimate::from_detection(&frame, det, 0.0, 0.3);
-        if let Some(vp) = det.vanishing_point {
-            let p = detector.points();
-            est.row_fit = fit.measure(
-                &vp.direction.into(),
-                det.rows.iter().map(|r| r.normal.into()),
-                &p.rays,
-                &p.weights,
-            );
-        }
+        est.row_fit = fit.measure_detection(det, detector.points());
         est.apply_guidance(&mut guidance);
         tilt = est.tilt_rad.unwrap_or(tilt);
         prior = narrow.prior(&est, tilt);
