@@ -98,9 +98,8 @@ fn percentile(sorted: &[f64], p: f64) -> f64 {
     sorted[i]
 }
 
-/// `v` copied and sorted ascending.
-fn sorted(v: Vec<f64>) -> Vec<f64> {
-    let mut v = v;
+/// `v` sorted ascending.
+fn sorted(mut v: Vec<f64>) -> Vec<f64> {
     v.sort_by(f64::total_cmp);
     v
 }
@@ -345,12 +344,18 @@ impl Shared {
 
     /// Makes `latest` the latest published frame; returns the frame it replaces (for its
     /// buffer to go back to the source once no reader holds it).
+    /// No reader holding the previous one (the usual case), its allocation is reused: the
+    /// publisher allocates nothing here per frame.
     pub(crate) fn replace_latest(&self, latest: Latest) -> Option<Arc<Frame>> {
-        let previous = lock(&self.latest).replace(Arc::new(latest));
-        previous.map(|p| match Arc::try_unwrap(p) {
-            Ok(l) => l.frame,
-            Err(p) => p.frame.clone(),
-        })
+        let mut slot = lock(&self.latest);
+        if let Some(previous) = slot.as_mut().and_then(Arc::get_mut) {
+            let previous = std::mem::replace(previous, latest);
+            drop(slot);
+            return Some(previous.frame);
+        }
+        let previous = slot.replace(Arc::new(latest));
+        drop(slot);
+        previous.map(|p| p.frame.clone())
     }
 
     pub(crate) fn set_recording(&self, state: String) {
@@ -359,5 +364,42 @@ impl Shared {
 
     pub(crate) fn set_recorded_frames(&self, n: u64) {
         self.recorded_frames.store(n, Ordering::Relaxed);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::frame::PixelFormat;
+
+    fn latest(seq: u64) -> Latest {
+        let frame = Frame {
+            seq,
+            capture_ns: seq,
+            receive_ns: seq,
+            width: 2,
+            height: 1,
+            format: PixelFormat::Mono8,
+            data: vec![0, 0],
+            truth: None,
+        };
+        Latest {
+            estimate: Estimate::empty(&frame, Status::NoRows),
+            frame: Arc::new(frame),
+            detection: Detection::default(),
+        }
+    }
+
+    #[test]
+    fn replacing_the_latest_hands_back_the_previous_frame_whoever_reads_it() {
+        let s = Shared::new();
+        assert!(s.replace_latest(latest(1)).is_none());
+        // no reader: the previous frame comes back, its slot reused
+        assert_eq!(s.replace_latest(latest(2)).unwrap().seq, 1);
+        // a reader holds frame 2: it keeps it, and the publisher still gets it back
+        let held = s.latest().unwrap();
+        assert_eq!(s.replace_latest(latest(3)).unwrap().seq, 2);
+        assert_eq!(held.frame.seq, 2);
+        assert_eq!(s.latest().unwrap().estimate.seq, 3);
     }
 }
