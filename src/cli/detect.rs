@@ -46,6 +46,7 @@ pub enum MethodArg {
     Edge,
     Combined,
     Pencil,
+    Strips,
     Auto,
 }
 
@@ -56,6 +57,7 @@ impl From<MethodArg> for Method {
             MethodArg::Edge => Method::Edge,
             MethodArg::Combined => Method::Combined,
             MethodArg::Pencil => Method::Pencil,
+            MethodArg::Strips => Method::Strips,
             MethodArg::Auto => Method::Auto,
         }
     }

@@ -174,10 +174,11 @@ pub fn run(a: EvalArgs) -> anyhow::Result<ExitCode> {
             "hough" => Ok(Method::Hough),
             "combined" => Ok(Method::Combined),
             "pencil" => Ok(Method::Pencil),
+            "strips" => Ok(Method::Strips),
             "auto" => Ok(Method::Auto),
             other => {
                 anyhow::bail!(
-                    "--methods: unknown method '{other}' (edge, hough, combined, pencil, auto)"
+                    "--methods: unknown method '{other}' (edge, hough, combined, pencil, strips, auto)"
                 )
             }
         })

@@ -65,7 +65,7 @@ fn slot(m: Method) -> Option<usize> {
         // Centre lines of paired edge boundaries (see [`pair_edge_rows`]): a class of
         // their own, with their own scatter.
         Method::Combined => Some(2),
-        Method::Pencil | Method::Auto => None,
+        Method::Pencil | Method::Strips | Method::Auto => None,
     }
 }
 
@@ -316,7 +316,7 @@ pub fn pair_edge_rows(
         let kind = match r.method {
             Method::Hough => Kind::Hough,
             Method::Edge => Kind::Edge,
-            Method::Combined | Method::Pencil | Method::Auto => continue,
+            Method::Combined | Method::Pencil | Method::Strips | Method::Auto => continue,
         };
         if inliers[i] {
             psi.push((angle(&r.normal), i, kind));

@@ -21,6 +21,7 @@ use super::pose::heading_tilt;
 use super::prior::DetectorPrior;
 use super::refit::{refit_rows, RefitImage, Tiles};
 use super::smooth::Gaussian;
+use super::strips::{StripsResult, StripsRows};
 use super::threshold::{keep_brightest, ThresholdResult};
 use super::vanishing::{refit_direction, VanishingFinder, VanishingResult};
 use super::vegetation::{vegetation_image, working_factor};
@@ -477,6 +478,9 @@ pub struct Detector {
     prep: Preparer,
     hough: HoughRows,
     pencil: PencilRows,
+    /// The strips method, built only when it is the method (it needs a forward-looking
+    /// camera).
+    strips: Option<StripsRows>,
     vanish: VanishingStage,
     points: Points,
     /// The edge method, set up for the working image size (built at the first image and
@@ -530,7 +534,17 @@ impl Detector {
         }
         // Check the edge options now rather than at the first image.
         opts.edge.validate()?;
+        opts.strips.validate()?;
+        let strips = match opts.method {
+            Method::Strips => Some(StripsRows::new(
+                opts.strips,
+                opts.max_tilt_deg,
+                &cal.mounting,
+            )?),
+            _ => None,
+        };
         Ok(Detector {
+            strips,
             prep: Preparer::new(cal, &opts)?,
             hough: HoughRows::new(opts.hough)?,
             pencil: PencilRows::new(opts.pencil, opts.max_tilt_deg, &cal.mounting)?,
@@ -589,7 +603,8 @@ impl Detector {
         let checked = prior
             .map(|p| p.validate().map(|v| (v, p.window_rad)))
             .transpose()?;
-        let window = checked.filter(|_| self.opts.method != Method::Pencil);
+        let window =
+            checked.filter(|_| !matches!(self.opts.method, Method::Pencil | Method::Strips));
         let t0 = Instant::now();
         self.last_prepare = self.prep.run(view, &mut self.points)?;
         let t1 = Instant::now();
@@ -634,6 +649,17 @@ impl Detector {
         edge: bool,
     ) -> Result<(), DetectError> {
         self.last_pencil = PencilResult::default();
+        if self.opts.method == Method::Strips {
+            self.run_strips(out)?;
+            let t2 = Instant::now();
+            self.times = StageTimes {
+                prepare: t1 - t0,
+                hough: t2 - t1,
+                edge: Duration::ZERO,
+                vanishing: Duration::ZERO,
+            };
+            return Ok(());
+        }
         if self.opts.method == Method::Pencil {
             // the combined method's vanishing point, one more candidate for the pencil's
             let seed = if self.opts.pencil.seed_with_combined {
@@ -964,6 +990,38 @@ impl Detector {
             self.polish_pencil_rows(out)?;
         }
         Ok(())
+    }
+
+    /// The strips method ([`super::strips`]): its rows through its vanishing point, then
+    /// the vanishing stage on those rows (and the polish, when `strips.polish`).
+    fn run_strips(&mut self, out: &mut Detection) -> Result<(), DetectError> {
+        out.rows.clear();
+        let Some(strips) = self.strips.as_mut() else {
+            return Err(DetectError::Options(
+                "method strips was not set up for this detector".into(),
+            ));
+        };
+        let p = &self.points;
+        let vp = strips.find(&p.rays, &p.weights, &p.pixel_rad, &mut out.rows)?;
+        self.vanish.run(None, out)?;
+        if self.opts.strips.polish {
+            self.polish_pencil_rows(out)?;
+        }
+        // The rows meet in the strips' vanishing point by construction; where the
+        // vanishing stage finds none among them (one or two rows), that point is the answer.
+        if let (None, Some(v), false) = (out.vanishing_point, vp, out.rows.is_empty()) {
+            let n = out.rows.len();
+            self.set_vanishing_point(out, v, n, 0.0);
+            out.quality = self
+                .last_strips()
+                .map_or(0.0, |s| s.comb_strength.clamp(0.0, 1.0));
+        }
+        Ok(())
+    }
+
+    /// What the strips method found in the last image (`None` unless it is the method).
+    pub fn last_strips(&self) -> Option<StripsResult> {
+        self.strips.as_ref().map(|s| s.last())
     }
 
     /// Refits the pencil's rows on the image's pixels near each (as the Hough rows are,

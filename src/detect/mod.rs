@@ -19,6 +19,7 @@ pub mod refit;
 pub mod scale;
 pub mod sections;
 pub mod smooth;
+pub mod strips;
 pub mod threshold;
 pub mod vanishing;
 pub mod vegetation;
@@ -58,6 +59,7 @@ impl Method {
             Method::Edge => "edge",
             Method::Combined => "combined",
             Method::Pencil => "pencil",
+            Method::Strips => "strips",
             Method::Auto => "auto",
         }
     }
@@ -95,6 +97,9 @@ pub enum Method {
     /// Rows as the peaks of the vegetation across the pencil of great circles through the
     /// vanishing point that makes them sharpest ([`pencil`]).
     Pencil,
+    /// Rows of a forward-looking camera as the strips' vegetation peaks lined up through
+    /// the vanishing point, on the teeth of their evenly spaced comb ([`strips`]).
+    Strips,
     /// An option only, never a row's method: the method for the calibration's lens,
     /// resolved when the detector is built ([`scale::resolve`]): `pencil` for a field of
     /// view narrower than [`scale::NARROW_EXTENT_RAD`] (a forward-looking perspective

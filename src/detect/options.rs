@@ -11,6 +11,7 @@ use super::mask::MaskOptions;
 use super::pencil::PencilOptions;
 use super::refit::RefitOptions;
 use super::smooth::SmoothOptions;
+use super::strips::StripsOptions;
 use super::threshold::ThresholdOptions;
 use super::vanishing::VanishingOptions;
 use super::vegetation::VegetationOptions;
@@ -58,6 +59,7 @@ pub struct DetectorOptions {
     pub edge: EdgeOptions,
     pub combined: CombinedOptions,
     pub pencil: PencilOptions,
+    pub strips: StripsOptions,
     pub vanishing: VanishingOptions,
 }
 
@@ -144,6 +146,7 @@ impl Default for DetectorOptions {
             edge: EdgeOptions::default(),
             combined: CombinedOptions::default(),
             pencil: PencilOptions::default(),
+            strips: StripsOptions::default(),
             vanishing: VanishingOptions::default(),
         }
     }

@@ -18,6 +18,7 @@ pub fn method_colour(m: Method) -> [u8; 3] {
         Method::Edge => [40, 90, 255],
         Method::Combined | Method::Auto => [255, 0, 255],
         Method::Pencil => [255, 160, 0],
+        Method::Strips => [0, 200, 255],
     }
 }
 

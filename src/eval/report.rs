@@ -37,6 +37,7 @@ fn colour(m: Method) -> [u8; 3] {
         Method::Hough => [220, 40, 40],
         Method::Combined | Method::Auto => [20, 150, 60],
         Method::Pencil => [230, 140, 0],
+        Method::Strips => [0, 170, 230],
     }
 }
 

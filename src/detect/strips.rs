@@ -1,0 +1,924 @@
+//! The strips method: crop rows of a forward-looking camera as the vegetation's peaks along
+//! horizontal strips, linked through the vanishing point that lines them up best, and read
+//! off as the teeth of the rows' evenly spaced comb.
+//!
+//! Owns the virtual image the method works in, the strips' peaks, the search for the
+//! vanishing point and the comb. The points (unit rays) are taken to the camera's own
+//! perspective image (pixels of an ideal pinhole on the optical axis, at the calibration's
+//! angular resolution), turned so that the strips run along the horizon that the mounting
+//! implies. Each strip (`strip_px` high) gives its vegetation profile across the image;
+//! the profile's peaks are where a crop row crosses the strip. For a vanishing point
+//! (a_v, p_v) — along and below the horizon — a peak at (a, p) lies at u = (a − a_v)/(p − p_v)
+//! in the pencil of lines through it: for crop rows on flat ground, u is proportional to the
+//! row's lateral position over the camera's height, so at the right vanishing point the
+//! peaks of one row share one u in every strip, and the rows' u are evenly spaced. The search
+//! maximises the agreement of the strips' peaks in u (a kernel sum over pairs from different
+//! strips, each peak's width in u its pixel uncertainty over its depth below the vanishing
+//! point) within the expected heading and tilt; the comb's period and phase then come from
+//! the peaks' u (the strongest Fourier component), and each tooth seen in at least
+//! `min_strips` strips is a row through the vanishing point. Peaks between the teeth (weeds,
+//! plant edges, shadows) are not rows. Every length is in pixels of that virtual image, so the
+//! same scene through any focal length gives the same rows.
+
+use super::{DetectError, Method, Row};
+use crate::camera::Mounting;
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+
+/// Options of the strips method. Lengths are pixels of the camera's perspective image at
+/// its angular resolution near the optical axis.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct StripsOptions {
+    /// Height of one strip along the image's vertical (across the horizon).
+    pub strip_px: f64,
+    /// Gaussian smoothing (sigma) of a strip's profile before its peaks are read: about a
+    /// plant's half-width.
+    pub smooth_px: f64,
+    /// A local maximum is a peak when it stands at least this fraction of the strip's
+    /// highest above the strip's median.
+    pub peak_fraction: f64,
+    /// Uncertainty (sigma) of a peak's position, the kernel's width in the search.
+    pub peak_sigma_px: f64,
+    /// Step of the coarse grid of candidate vanishing points (then halved to 1 px).
+    pub search_step_px: f64,
+    /// Largest heading of the rows from the robot's forward axis searched (degrees).
+    pub max_heading_deg: f64,
+    /// Peaks nearer the horizon than this (below the candidate vanishing point) take no
+    /// part: there the rows merge.
+    pub min_depth_px: f64,
+    /// A tooth of the comb is a row when peaks lie on it in at least this many strips.
+    pub min_strips: usize,
+    /// Shortest and longest comb period searched, in u (lateral over depth in the pencil:
+    /// row spacing over the camera's height, about).
+    pub comb_min_period: f64,
+    pub comb_max_period: f64,
+    /// Periods tried between the two, geometrically spaced.
+    pub comb_periods: usize,
+    /// A peak is on a tooth within this fraction of the period.
+    pub comb_band: f64,
+    /// At most this many rows are reported (the best supported).
+    pub max_rows: usize,
+    /// Refit the rows on the image's pixels near each, and the vanishing point on them (as
+    /// the pencil's polish).
+    pub polish: bool,
+}
+
+impl Default for StripsOptions {
+    fn default() -> Self {
+        StripsOptions {
+            strip_px: 11.0,
+            smooth_px: 4.0,
+            peak_fraction: 0.25,
+            peak_sigma_px: 3.0,
+            search_step_px: 8.0,
+            max_heading_deg: 25.0,
+            min_depth_px: 20.0,
+            min_strips: 8,
+            comb_min_period: 0.075,
+            comb_max_period: 0.75,
+            comb_periods: 160,
+            comb_band: 0.25,
+            max_rows: 16,
+            polish: true,
+        }
+    }
+}
+
+impl StripsOptions {
+    pub fn validate(&self) -> Result<(), DetectError> {
+        let bad = |what: &str| Err(DetectError::Options(format!("strips.{what}")));
+        let pos = |v: f64| v.is_finite() && v > 0.0;
+        if !(pos(self.strip_px) && self.strip_px <= 1000.0) {
+            return bad(&format!(
+                "strip_px = {} must be within (0, 1000]",
+                self.strip_px
+            ));
+        }
+        if !(pos(self.smooth_px) && self.smooth_px <= 100.0) {
+            return bad(&format!(
+                "smooth_px = {} must be within (0, 100]",
+                self.smooth_px
+            ));
+        }
+        if !(self.peak_fraction.is_finite() && (0.0..1.0).contains(&self.peak_fraction)) {
+            return bad(&format!(
+                "peak_fraction = {} must be within [0, 1)",
+                self.peak_fraction
+            ));
+        }
+        if !(pos(self.peak_sigma_px) && self.peak_sigma_px <= 100.0) {
+            return bad(&format!(
+                "peak_sigma_px = {} must be within (0, 100]",
+                self.peak_sigma_px
+            ));
+        }
+        if !(self.search_step_px.is_finite() && (1.0..=200.0).contains(&self.search_step_px)) {
+            return bad(&format!(
+                "search_step_px = {} must be within 1..=200",
+                self.search_step_px
+            ));
+        }
+        if !(self.max_heading_deg.is_finite() && (0.0..80.0).contains(&self.max_heading_deg)) {
+            return bad(&format!(
+                "max_heading_deg = {} must be within [0, 80)",
+                self.max_heading_deg
+            ));
+        }
+        if !(pos(self.min_depth_px) && self.min_depth_px <= 1000.0) {
+            return bad(&format!(
+                "min_depth_px = {} must be within (0, 1000]",
+                self.min_depth_px
+            ));
+        }
+        if !(2..=1000).contains(&self.min_strips) {
+            return bad(&format!(
+                "min_strips = {} must be within 2..=1000",
+                self.min_strips
+            ));
+        }
+        if !(pos(self.comb_min_period)
+            && self.comb_min_period < self.comb_max_period
+            && self.comb_max_period <= 100.0)
+        {
+            return bad(&format!(
+                "comb_min_period = {}, comb_max_period = {}: need 0 < min < max <= 100",
+                self.comb_min_period, self.comb_max_period
+            ));
+        }
+        if !(2..=10_000).contains(&self.comb_periods) {
+            return bad(&format!(
+                "comb_periods = {} must be within 2..=10000",
+                self.comb_periods
+            ));
+        }
+        if !(self.comb_band > 0.0 && self.comb_band <= 0.5) {
+            return bad(&format!(
+                "comb_band = {} must be within (0, 0.5]",
+                self.comb_band
+            ));
+        }
+        if !(1..=256).contains(&self.max_rows) {
+            return bad(&format!(
+                "max_rows = {} must be within 1..=256",
+                self.max_rows
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// What the strips method found in the last image.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct StripsResult {
+    /// Peaks read off the strips.
+    pub peaks: usize,
+    /// The vanishing point (virtual image: along, below the horizon, pixels) and its
+    /// agreement score; `None` when there was too little to search.
+    pub vanishing_px: Option<[f64; 2]>,
+    pub agreement: f64,
+    /// The comb's period (in u) and its strength (0..1, the peaks' Fourier amplitude).
+    pub period: f64,
+    pub comb_strength: f64,
+    /// Candidate vanishing points evaluated.
+    pub evaluated: usize,
+}
+
+/// A peak of a strip: along the horizon, below it (pixels), its height, its strip.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Peak {
+    a: f64,
+    p: f64,
+    w: f64,
+    strip: u32,
+}
+
+/// A peak seen from a candidate vanishing point: its u, the kernel's width in u, its weight
+/// and strip.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Seen {
+    u: f64,
+    s: f64,
+    w: f64,
+    strip: u32,
+}
+
+/// The strips method's state: the virtual image's frame, its search window and the
+/// buffers reused from image to image.
+#[derive(Debug, Clone)]
+pub struct StripsRows {
+    opts: StripsOptions,
+    max_tilt: f64,
+    fwd: Vector3<f64>,
+    left: Vector3<f64>,
+    up: Vector3<f64>,
+    /// Unit image directions (row, column) of "below the horizon" and "along it".
+    e_p: [f64; 2],
+    e_a: [f64; 2],
+    /// Pixels per radian of the virtual image (the last image's).
+    scale: f64,
+    pts: Vec<[f64; 3]>,
+    hist: Vec<f64>,
+    smooth: Vec<f64>,
+    kernel: Vec<f64>,
+    scratch: Vec<f64>,
+    peaks: Vec<Peak>,
+    seen: Vec<Seen>,
+    /// The comb's teeth that are rows: u and weight.
+    teeth: Vec<[f64; 2]>,
+    last: StripsResult,
+}
+
+/// The most strips and profile bins an image may have (a hostile calibration or image
+/// cannot make the buffers grow without bound).
+const MAX_STRIPS: usize = 4096;
+const MAX_BINS: usize = 16384;
+
+impl StripsRows {
+    /// `max_tilt_deg`: the vanishing point is searched within ± this angle of the robot's
+    /// horizontal plane; the mounting says where that plane and the robot's forward axis are.
+    pub fn new(
+        opts: StripsOptions,
+        max_tilt_deg: f64,
+        mounting: &Mounting,
+    ) -> Result<Self, DetectError> {
+        opts.validate()?;
+        let rot = mounting.robot_from_camera().inverse();
+        let fwd = rot * Vector3::x();
+        let up = rot * Vector3::z();
+        // the camera looks along −z: the robot's forward axis must be in front of it
+        if -fwd.z < 0.2 {
+            return Err(DetectError::Options(format!(
+                "method strips needs a forward-looking camera: the robot's forward axis is \
+                 {:.0}° from the optical axis with this mounting (pitch_deg {}, roll_deg {}, \
+                 yaw_deg {}); use hough, combined or auto",
+                (-fwd.z).clamp(-1.0, 1.0).acos().to_degrees(),
+                mounting.pitch_deg,
+                mounting.roll_deg,
+                mounting.yaw_deg
+            )));
+        }
+        // image directions of "down towards the ground" and "along the horizon" at the
+        // nominal vanishing point
+        let eps: f64 = 1e-3;
+        let p0 = project(&fwd, 1.0);
+        let p1 = project(&(fwd * eps.cos() - up * eps.sin()), 1.0);
+        let (Some(p0), Some(p1)) = (p0, p1) else {
+            return Err(DetectError::Options(
+                "method strips: the mounting's horizon is not in the image".into(),
+            ));
+        };
+        let d = [p1[0] - p0[0], p1[1] - p0[1]];
+        let n = (d[0] * d[0] + d[1] * d[1]).sqrt();
+        if n <= 0.0 {
+            return Err(DetectError::Options(
+                "method strips: the mounting's horizon is not in the image".into(),
+            ));
+        }
+        let e_p = [d[0] / n, d[1] / n];
+        Ok(StripsRows {
+            opts,
+            max_tilt: max_tilt_deg.to_radians(),
+            fwd,
+            left: rot * Vector3::y(),
+            up,
+            e_p,
+            e_a: [-e_p[1], e_p[0]],
+            scale: 0.0,
+            pts: Vec::new(),
+            hist: Vec::new(),
+            smooth: Vec::new(),
+            kernel: Vec::new(),
+            scratch: Vec::new(),
+            peaks: Vec::new(),
+            seen: Vec::new(),
+            teeth: Vec::new(),
+            last: StripsResult::default(),
+        })
+    }
+
+    pub fn options(&self) -> &StripsOptions {
+        &self.opts
+    }
+
+    /// What the last image gave.
+    pub fn last(&self) -> StripsResult {
+        self.last
+    }
+
+    /// (along, below) of a ray in the virtual image, pixels; `None` behind the camera.
+    fn to_virtual(&self, r: &Vector3<f64>) -> Option<[f64; 2]> {
+        let q = project(r, self.scale)?;
+        Some([
+            q[0] * self.e_a[0] + q[1] * self.e_a[1],
+            q[0] * self.e_p[0] + q[1] * self.e_p[1],
+        ])
+    }
+
+    /// The ray of a virtual image point (along, below).
+    fn to_ray(&self, a: f64, p: f64) -> Vector3<f64> {
+        let row = a * self.e_a[0] + p * self.e_p[0];
+        let col = a * self.e_a[1] + p * self.e_p[1];
+        Vector3::new(row / self.scale, col / self.scale, -1.0).normalize()
+    }
+
+    /// Finds the rows among the points (unit rays, weights, each pixel's angular size)
+    /// into `rows` (cleared first). Returns the vanishing point's direction, or `None` when
+    /// the points hold no rows.
+    pub fn find(
+        &mut self,
+        rays: &[[f32; 3]],
+        weights: &[f32],
+        pixel_rad: &[f32],
+        rows: &mut Vec<Row>,
+    ) -> Result<Option<Vector3<f64>>, DetectError> {
+        if rays.len() != weights.len() || rays.len() != pixel_rad.len() {
+            return Err(DetectError::Buffer(format!(
+                "strips: {} rays, {} weights, {} pixel sizes",
+                rays.len(),
+                weights.len(),
+                pixel_rad.len()
+            )));
+        }
+        rows.clear();
+        self.last = StripsResult::default();
+        if !self.set_scale(rays, pixel_rad) {
+            return Ok(None);
+        }
+        self.collect_points(rays, weights);
+        self.read_peaks();
+        self.last.peaks = self.peaks.len();
+        let Some((av, pv, agreement)) = self.search() else {
+            return Ok(None);
+        };
+        self.last.vanishing_px = Some([av, pv]);
+        self.last.agreement = agreement;
+        self.comb_rows(av, pv, rows);
+        Ok(Some(self.to_ray(av, pv)))
+    }
+
+    /// The virtual image's pixels per unit of the ideal image plane (its focal length): the
+    /// median over the points of cos^1.5 θ / (angular size of the point's pixel), θ the
+    /// point's angle from the optical axis — exact for a pinhole camera, whose pixel at θ
+    /// spans a solid angle of cos³θ / f². False when there are no points.
+    fn set_scale(&mut self, rays: &[[f32; 3]], pixel_rad: &[f32]) -> bool {
+        let stride = pixel_rad.len().div_ceil(512).max(1);
+        self.scratch.clear();
+        self.scratch.extend(
+            rays.iter()
+                .zip(pixel_rad)
+                .step_by(stride)
+                .filter(|(r, a)| **a > 0.0 && a.is_finite() && -r[2] > 0.05)
+                .map(|(r, &a)| (-r[2] as f64).powf(1.5) / a as f64),
+        );
+        if self.scratch.is_empty() {
+            return false;
+        }
+        let mid = self.scratch.len() / 2;
+        let (_, m, _) = self.scratch.select_nth_unstable_by(mid, f64::total_cmp);
+        self.scale = *m;
+        self.scale.is_finite()
+    }
+
+    /// The points in front of the camera in the virtual image (along, below, weight).
+    fn collect_points(&mut self, rays: &[[f32; 3]], weights: &[f32]) {
+        self.pts.clear();
+        for (r, &w) in rays.iter().zip(weights) {
+            if w.is_nan() || w <= 0.0 {
+                continue;
+            }
+            let v = Vector3::new(r[0] as f64, r[1] as f64, r[2] as f64);
+            if let Some([a, p]) = self.to_virtual(&v) {
+                self.pts.push([a, p, w as f64]);
+            }
+        }
+    }
+
+    /// Each strip's profile across the image, smoothed, and its peaks into `self.peaks`.
+    fn read_peaks(&mut self) {
+        self.peaks.clear();
+        let (mut a0, mut a1, mut p0, mut p1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
+        for &[a, p, _] in &self.pts {
+            a0 = a0.min(a);
+            a1 = a1.max(a);
+            p0 = p0.min(p);
+            p1 = p1.max(p);
+        }
+        if self.pts.len() < 2 || a1 <= a0 || p1 <= p0 {
+            return;
+        }
+        let sh = self.opts.strip_px;
+        let strips = (((p1 - p0) / sh).floor() as usize + 1).min(MAX_STRIPS);
+        let bins = ((a1 - a0).floor() as usize + 1).min(MAX_BINS);
+        self.hist.clear();
+        self.hist.resize(strips * bins, 0.0);
+        for &[a, p, w] in &self.pts {
+            let s = ((p - p0) / sh) as usize;
+            let b = (a - a0) as usize;
+            if s < strips && b < bins {
+                self.hist[s * bins + b] += w;
+            }
+        }
+        self.make_kernel();
+        for s in 0..strips {
+            self.strip_peaks(s, bins, a0, p0 + (s as f64 + 0.5) * sh);
+        }
+    }
+
+    fn make_kernel(&mut self) {
+        let sigma = self.opts.smooth_px;
+        let half = (3.0 * sigma).ceil() as usize;
+        self.kernel.clear();
+        for i in 0..=2 * half {
+            let x = i as f64 - half as f64;
+            self.kernel.push((-0.5 * x * x / (sigma * sigma)).exp());
+        }
+        let sum: f64 = self.kernel.iter().sum();
+        for k in &mut self.kernel {
+            *k /= sum;
+        }
+    }
+
+    /// The peaks of strip `s` (its centre `p` below the horizon).
+    fn strip_peaks(&mut self, s: usize, bins: usize, a0: f64, p: f64) {
+        let row = &self.hist[s * bins..(s + 1) * bins];
+        if row.iter().all(|&x| x == 0.0) {
+            return;
+        }
+        let half = self.kernel.len() / 2;
+        self.smooth.clear();
+        for i in 0..bins {
+            let lo = i.saturating_sub(half);
+            let hi = (i + half).min(bins - 1);
+            let mut acc = 0.0;
+            for (j, x) in row.iter().enumerate().take(hi + 1).skip(lo) {
+                acc += x * self.kernel[j + half - i];
+            }
+            self.smooth.push(acc);
+        }
+        self.scratch.clear();
+        self.scratch.extend_from_slice(&self.smooth);
+        let mid = self.scratch.len() / 2;
+        let median = *self.scratch.select_nth_unstable_by(mid, f64::total_cmp).1;
+        let top = self.smooth.iter().fold(0.0f64, |m, &x| m.max(x - median));
+        if top <= 0.0 {
+            return;
+        }
+        let floor = self.opts.peak_fraction * top;
+        for i in 1..bins.saturating_sub(1) {
+            let (l, c, r) = (self.smooth[i - 1], self.smooth[i], self.smooth[i + 1]);
+            let h = c - median;
+            if c > l && c >= r && h > 0.0 && h >= floor {
+                // the parabola through the three bins for the peak's sub-pixel position
+                let den = l - 2.0 * c + r;
+                let off = if den < 0.0 {
+                    (0.5 * (l - r) / den).clamp(-0.5, 0.5)
+                } else {
+                    0.0
+                };
+                self.peaks.push(Peak {
+                    a: a0 + i as f64 + 0.5 + off,
+                    p,
+                    w: h,
+                    strip: s as u32,
+                });
+            }
+        }
+    }
+
+    /// The candidate vanishing points' window in the virtual image: the box around the
+    /// directions within the heading and tilt limits.
+    fn window(&self) -> Option<[f64; 4]> {
+        let h = self.opts.max_heading_deg.to_radians();
+        let t = self.max_tilt;
+        let (mut a0, mut a1, mut p0, mut p1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
+        for (az, el) in [
+            (-h, -t),
+            (-h, 0.0),
+            (-h, t),
+            (0.0, -t),
+            (0.0, t),
+            (h, -t),
+            (h, 0.0),
+            (h, t),
+        ] {
+            let d = (self.fwd * az.cos() + self.left * az.sin()) * el.cos() + self.up * el.sin();
+            let [a, p] = self.to_virtual(&d)?;
+            a0 = a0.min(a);
+            a1 = a1.max(a);
+            p0 = p0.min(p);
+            p1 = p1.max(p);
+        }
+        Some([a0, a1, p0, p1])
+    }
+
+    /// The vanishing point whose pencil lines the strips' peaks up best: a coarse grid over
+    /// the window, then halving steps around the best. (along, below, agreement).
+    fn search(&mut self) -> Option<(f64, f64, f64)> {
+        if self.peaks.len() < 4 {
+            return None;
+        }
+        let [a0, a1, p0, p1] = self.window()?;
+        let step = self.opts.search_step_px;
+        let na = ((a1 - a0) / step).ceil() as usize + 1;
+        let np = ((p1 - p0) / step).ceil() as usize + 1;
+        if na * np > 1_000_000 {
+            return None;
+        }
+        let mut best = (f64::MIN, 0.0, 0.0);
+        for j in 0..np {
+            for i in 0..na {
+                let (a, p) = (a0 + i as f64 * step, p0 + j as f64 * step);
+                let e = self.agreement(a, p);
+                if e > best.0 {
+                    best = (e, a, p);
+                }
+            }
+        }
+        let mut st = 0.5 * step;
+        while st >= 1.0 {
+            let (_, ca, cp) = best;
+            for (da, dp) in [
+                (-st, -st),
+                (0.0, -st),
+                (st, -st),
+                (-st, 0.0),
+                (st, 0.0),
+                (-st, st),
+                (0.0, st),
+                (st, st),
+            ] {
+                let e = self.agreement(ca + da, cp + dp);
+                if e > best.0 {
+                    best = (e, ca + da, cp + dp);
+                }
+            }
+            st *= 0.5;
+        }
+        (best.0 > 0.0).then_some((best.1, best.2, best.0))
+    }
+
+    /// Fills `self.seen` with the peaks below the candidate (a, p), sorted by u; returns the
+    /// share of the peaks' count that is there.
+    fn see(&mut self, a: f64, p: f64) -> f64 {
+        self.seen.clear();
+        let (sig, min_d) = (self.opts.peak_sigma_px, self.opts.min_depth_px);
+        for k in &self.peaks {
+            let d = k.p - p;
+            if d > min_d {
+                self.seen.push(Seen {
+                    u: (k.a - a) / d,
+                    s: sig / d,
+                    w: k.w,
+                    strip: k.strip,
+                });
+            }
+        }
+        self.seen.sort_unstable_by(|x, y| x.u.total_cmp(&y.u));
+        self.seen.len() as f64 / self.peaks.len().max(1) as f64
+    }
+
+    /// How well the peaks agree in u seen from (a, p): Σ over pairs of peaks from different
+    /// strips of wᵢwⱼ·K(Δu / √(sᵢ² + sⱼ²)), over (Σw)², times the share of the peaks below
+    /// the point. K is the triweight kernel with a standard deviation of 1.
+    fn agreement(&mut self, a: f64, p: f64) -> f64 {
+        self.last.evaluated += 1;
+        let share = self.see(a, p);
+        if self.seen.len() < 4 {
+            return 0.0;
+        }
+        let s_max = self.seen.iter().fold(0.0f64, |m, x| m.max(x.s));
+        let (mut num, mut total) = (0.0, 0.0);
+        for i in 0..self.seen.len() {
+            let x = self.seen[i];
+            total += x.w;
+            let reach = 3.0 * (x.s * x.s + s_max * s_max).sqrt();
+            for y in &self.seen[i + 1..] {
+                let du = y.u - x.u;
+                if du > reach {
+                    break;
+                }
+                if y.strip == x.strip {
+                    continue;
+                }
+                let t2 = du * du / (9.0 * (x.s * x.s + y.s * y.s));
+                if t2 < 1.0 {
+                    let k = 1.0 - t2;
+                    num += x.w * y.w * k * k * k;
+                }
+            }
+        }
+        if total <= 0.0 {
+            return 0.0;
+        }
+        num / (total * total) * share
+    }
+
+    /// The comb of the peaks' u seen from (a, p) and its teeth as rows into `rows`.
+    fn comb_rows(&mut self, a: f64, p: f64, rows: &mut Vec<Row>) {
+        self.see(a, p);
+        if self.seen.is_empty() {
+            return;
+        }
+        let o = self.opts;
+        let total: f64 = self.seen.iter().map(|x| x.w).sum();
+        let ratio = (o.comb_max_period / o.comb_min_period).powf(1.0 / (o.comb_periods - 1) as f64);
+        let mut best = (0.0, o.comb_min_period, 0.0);
+        let mut period = o.comb_min_period;
+        for _ in 0..o.comb_periods {
+            let (mut c, mut s) = (0.0, 0.0);
+            let f = std::f64::consts::TAU / period;
+            for x in &self.seen {
+                let (sn, cs) = (f * x.u).sin_cos();
+                c += x.w * cs;
+                s += x.w * sn;
+            }
+            let amp = c.hypot(s) / total;
+            if amp > best.0 {
+                best = (amp, period, s.atan2(c) / f);
+            }
+            period *= ratio;
+        }
+        let (amp, period, phase) = best;
+        self.last.period = period;
+        self.last.comb_strength = amp;
+        let (u0, u1) = (self.seen[0].u, self.seen[self.seen.len() - 1].u);
+        let k0 = ((u0 - phase) / period).floor() as i64;
+        let k1 = ((u1 - phase) / period).ceil() as i64;
+        if k1 - k0 > 4096 {
+            return;
+        }
+        let vp = self.to_ray(a, p);
+        self.teeth.clear();
+        for k in k0..=k1 {
+            let m = phase + k as f64 * period;
+            let band = o.comb_band * period;
+            let lo = self.seen.partition_point(|x| x.u < m - band);
+            let hi = self.seen.partition_point(|x| x.u <= m + band);
+            let on = &self.seen[lo..hi];
+            if distinct_strips(on) >= o.min_strips {
+                let w: f64 = on.iter().map(|x| x.w).sum();
+                self.teeth.push([m, w]);
+            }
+        }
+        // the best-supported teeth, at most max_rows, reported in order across the image
+        if self.teeth.len() > o.max_rows {
+            self.teeth.sort_unstable_by(|x, y| y[1].total_cmp(&x[1]));
+            self.teeth.truncate(o.max_rows);
+        }
+        let depth = 100.0_f64.max(2.0 * o.min_depth_px);
+        for &[m, _] in &self.teeth {
+            let lo = self
+                .seen
+                .partition_point(|x| x.u < m - o.comb_band * period);
+            let hi = self
+                .seen
+                .partition_point(|x| x.u <= m + o.comb_band * period);
+            let n = vp.cross(&self.to_ray(a + m * depth, p + depth));
+            let norm = n.norm();
+            if norm > 0.0 {
+                rows.push(Row {
+                    normal: n / norm,
+                    method: Method::Strips,
+                    support: (hi - lo) as u32,
+                });
+            }
+        }
+    }
+}
+
+/// How many different strips the peaks (sorted by u) come from.
+fn distinct_strips(on: &[Seen]) -> usize {
+    let mut n = 0;
+    for (i, x) in on.iter().enumerate() {
+        if on[..i].iter().all(|y| y.strip != x.strip) {
+            n += 1;
+        }
+    }
+    n
+}
+
+/// A ray's point in the camera's perspective image (row, column), `scale` pixels per unit
+/// of the ideal image plane; `None` behind the camera (it looks along −z).
+fn project(r: &Vector3<f64>, scale: f64) -> Option<[f64; 2]> {
+    let z = -r.z;
+    if z <= 1e-6 {
+        return None;
+    }
+    Some([r.x / z * scale, r.y / z * scale])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Rotation3;
+
+    /// A flat field seen by a pinhole of focal length `f` (pixels) on a `size`² image,
+    /// mounted as `m`, the rows `spacing` apart turned by `heading` (radians): plant points
+    /// along each row (a deterministic scatter across its width), as rays, weights and pixel
+    /// sizes; and the rows' true plane normals in the camera frame.
+    struct Field {
+        rays: Vec<[f32; 3]>,
+        weights: Vec<f32>,
+        pixel_rad: Vec<f32>,
+        normals: Vec<Vector3<f64>>,
+    }
+
+    fn field(f: f64, size: f64, m: &Mounting, spacing: f64, offset: f64, heading: f64) -> Field {
+        let cam_from_robot = m.robot_from_camera().inverse();
+        let yaw = Rotation3::from_axis_angle(&Vector3::z_axis(), heading);
+        let h = m.height_m;
+        let (mut rays, mut weights, mut pixel_rad, mut normals) = (vec![], vec![], vec![], vec![]);
+        let mut seed = 12345u64;
+        let mut rnd = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for k in -8..=8 {
+            let y = offset + k as f64 * spacing;
+            let a = cam_from_robot * (yaw * Vector3::new(2.0, y, -h));
+            let b = cam_from_robot * (yaw * Vector3::new(12.0, y, -h));
+            normals.push(a.cross(&b).normalize());
+            for _ in 0..3000 {
+                // forward distances spread like the image's rows (denser far away)
+                let x = 1.0 / (1.0 / 1.0 - rnd() * (1.0 / 1.0 - 1.0 / 40.0));
+                let p = cam_from_robot * (yaw * Vector3::new(x, y + (rnd() - 0.5) * 0.08, -h));
+                let r = p.normalize();
+                if -r.z <= 0.05 {
+                    continue;
+                }
+                let (row, col) = (r.x / -r.z * f, r.y / -r.z * f);
+                if row.abs() > size / 2.0 || col.abs() > size / 2.0 {
+                    continue;
+                }
+                rays.push([r.x as f32, r.y as f32, r.z as f32]);
+                weights.push(1.0);
+                pixel_rad.push(((-r.z).powf(1.5) / f) as f32);
+            }
+        }
+        Field {
+            rays,
+            weights,
+            pixel_rad,
+            normals,
+        }
+    }
+
+    fn forward_camera() -> Mounting {
+        Mounting {
+            pitch_deg: -47.0,
+            ..Mounting::default()
+        }
+    }
+
+    /// The angle (radians) from `n` to the nearest of `truth`'s normals.
+    fn nearest(n: &Vector3<f64>, truth: &[Vector3<f64>]) -> f64 {
+        truth
+            .iter()
+            .map(|t| n.dot(t).abs().min(1.0).acos())
+            .fold(f64::MAX, f64::min)
+    }
+
+    #[test]
+    fn rows_and_vanishing_point_of_a_flat_field() {
+        let m = forward_camera();
+        let fld = field(300.0, 512.0, &m, 0.5, 0.1, 5f64.to_radians());
+        let mut s = StripsRows::new(StripsOptions::default(), 15.0, &m).unwrap();
+        let mut rows = Vec::new();
+        let vp = s
+            .find(&fld.rays, &fld.weights, &fld.pixel_rad, &mut rows)
+            .unwrap()
+            .expect("a vanishing point");
+        let cam_from_robot = m.robot_from_camera().inverse();
+        let yaw = Rotation3::from_axis_angle(&Vector3::z_axis(), 5f64.to_radians());
+        let truth = cam_from_robot * (yaw * Vector3::x());
+        let err = vp.dot(&truth).abs().min(1.0).acos();
+        // the search's last step is one pixel: 3.3 mrad at f = 300 px
+        assert!(err < 2.5 / 300.0, "vanishing point {err} rad off");
+        assert!(rows.len() >= 4, "{} rows", rows.len());
+        for r in &rows {
+            assert_eq!(r.method, Method::Strips);
+            let e = nearest(&r.normal, &fld.normals);
+            assert!(
+                e < 2.5 / 300.0,
+                "row {:?} is {e} rad from every true row",
+                r.normal
+            );
+        }
+        // one row per true row: no two published rows on the same one
+        for (i, a) in rows.iter().enumerate() {
+            for b in &rows[i + 1..] {
+                assert!(a.normal.dot(&b.normal).abs() < 0.9999, "duplicate rows");
+            }
+        }
+    }
+
+    #[test]
+    fn the_same_field_through_focal_lengths_4x_apart_gives_the_same_rows() {
+        let m = forward_camera();
+        let narrow = field(1200.0, 2048.0, &m, 0.5, -0.15, -3f64.to_radians());
+        let wide = field(300.0, 512.0, &m, 0.5, -0.15, -3f64.to_radians());
+        let (mut a, mut b) = (Vec::new(), Vec::new());
+        let opts = StripsOptions::default();
+        let va = StripsRows::new(opts, 15.0, &m)
+            .unwrap()
+            .find(&narrow.rays, &narrow.weights, &narrow.pixel_rad, &mut a)
+            .unwrap()
+            .unwrap();
+        let vb = StripsRows::new(opts, 15.0, &m)
+            .unwrap()
+            .find(&wide.rays, &wide.weights, &wide.pixel_rad, &mut b)
+            .unwrap()
+            .unwrap();
+        let d = va.dot(&vb).abs().min(1.0).acos();
+        assert!(d < 2.5 / 300.0, "vanishing points {d} rad apart");
+        assert!(
+            a.len() >= 4 && b.len() >= 4,
+            "{} and {} rows",
+            a.len(),
+            b.len()
+        );
+        let truth = narrow.normals;
+        for r in a.iter().chain(&b) {
+            let e = nearest(&r.normal, &truth);
+            assert!(e < 2.5 / 300.0, "a row {e} rad from every true row");
+        }
+    }
+
+    #[test]
+    fn scattered_points_give_no_rows_between_the_teeth() {
+        // rows plus uniform weeds: every published row is a true row
+        let m = forward_camera();
+        let mut fld = field(300.0, 512.0, &m, 0.6, 0.0, 0.0);
+        let mut seed = 99u64;
+        for _ in 0..6000 {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1);
+            let row = ((seed >> 33) % 512) as f64 - 256.0;
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1);
+            let col = ((seed >> 33) % 512) as f64 - 256.0;
+            let r = Vector3::new(row / 300.0, col / 300.0, -1.0).normalize();
+            fld.rays.push([r.x as f32, r.y as f32, r.z as f32]);
+            fld.weights.push(1.0);
+            fld.pixel_rad.push(((-r.z).powf(1.5) / 300.0) as f32);
+        }
+        let mut s = StripsRows::new(StripsOptions::default(), 15.0, &m).unwrap();
+        let mut rows = Vec::new();
+        s.find(&fld.rays, &fld.weights, &fld.pixel_rad, &mut rows)
+            .unwrap();
+        assert!(rows.len() >= 3);
+        for r in &rows {
+            let e = nearest(&r.normal, &fld.normals);
+            assert!(e < 2.5 / 300.0, "a row {e} rad from every true row");
+        }
+    }
+
+    #[test]
+    fn a_camera_looking_down_is_refused_by_name() {
+        let e = StripsRows::new(StripsOptions::default(), 15.0, &Mounting::default())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("strips") && e.contains("forward-looking"), "{e}");
+    }
+
+    #[test]
+    fn bad_options_are_named() {
+        for (o, key) in [
+            (
+                StripsOptions {
+                    strip_px: 0.0,
+                    ..StripsOptions::default()
+                },
+                "strip_px",
+            ),
+            (
+                StripsOptions {
+                    comb_max_period: f64::NAN,
+                    ..StripsOptions::default()
+                },
+                "comb_max_period",
+            ),
+            (
+                StripsOptions {
+                    min_strips: 1,
+                    ..StripsOptions::default()
+                },
+                "min_strips",
+            ),
+        ] {
+            let e = o.validate().unwrap_err().to_string();
+            assert!(e.contains(key), "{e}");
+        }
+    }
+
+    #[test]
+    fn no_points_no_rows_and_mismatched_buffers_are_an_error() {
+        let m = forward_camera();
+        let mut s = StripsRows::new(StripsOptions::default(), 15.0, &m).unwrap();
+        let mut rows = vec![];
+        assert_eq!(s.find(&[], &[], &[], &mut rows).unwrap(), None);
+        assert!(rows.is_empty());
+        assert!(s.find(&[[0.0, 0.0, -1.0]], &[], &[], &mut rows).is_err());
+    }
+}
