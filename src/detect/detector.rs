@@ -1169,13 +1169,18 @@ mod tests {
         let fisheye = ideal_fisheye(100, 120).unwrap();
         let d = Detector::new(&fisheye, DetectorOptions::default()).unwrap();
         assert_eq!(d.options().method, Method::Combined);
-        // a forward-looking perspective camera gets the pencil
+        // a forward-looking perspective camera gets the strips
         let pinhole = crate::camera::Calibration::parse_toml(
             include_str!("../../config/calib/pinhole_512_f300.toml"),
             std::path::Path::new("pinhole_512_f300.toml"),
         )
         .unwrap();
         let d = Detector::new(&pinhole, DetectorOptions::default()).unwrap();
+        assert_eq!(d.options().method, Method::Strips);
+        // the same lens looking straight down gets the pencil
+        let mut down = pinhole.clone();
+        down.mounting.pitch_deg = 0.0;
+        let d = Detector::new(&down, DetectorOptions::default()).unwrap();
         assert_eq!(d.options().method, Method::Pencil);
         // an explicit method is kept whatever the lens
         let hough = DetectorOptions {

@@ -101,9 +101,10 @@ pub enum Method {
     /// the vanishing point, on the teeth of their evenly spaced comb ([`strips`]).
     Strips,
     /// An option only, never a row's method: the method for the calibration's lens,
-    /// resolved when the detector is built ([`scale::resolve`]): `pencil` for a field of
-    /// view narrower than [`scale::NARROW_EXTENT_RAD`] (a forward-looking perspective
-    /// camera), `combined` otherwise (the omnidirectional lenses of the paper).
+    /// resolved when the detector is built ([`scale::resolve`]): `strips` for a field of
+    /// view narrower than [`scale::NARROW_EXTENT_RAD`] on a forward-looking mounting (a
+    /// perspective camera; `pencil` if it looks down), `combined` otherwise (the
+    /// omnidirectional lenses of the paper).
     Auto,
 }
 

@@ -34,8 +34,8 @@ pub enum Binning {
 #[serde(deny_unknown_fields, default)]
 pub struct DetectorOptions {
     /// The row-detection method. Default `auto`: the one for the calibration's lens
-    /// (pencil for a perspective camera's narrow field of view, combined for an
-    /// omnidirectional lens; [`Method::Auto`]).
+    /// (strips for a forward-looking perspective camera's narrow field of view, combined
+    /// for an omnidirectional lens; [`Method::Auto`]).
     pub method: Method,
     /// Largest expected tilt of the robot (degrees): bounds the sky mask and the search for
     /// the vanishing point.

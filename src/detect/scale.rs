@@ -137,26 +137,29 @@ pub struct Scales {
     pub derived: bool,
 }
 
-/// `opts` with every angular option left absent set for `cal`: its reference value times
-/// the factor (`opts.angle_scale`, else derived from the calibration's field of view),
-/// accumulator sizes rounded to whole cells. Options given explicitly are kept.
 /// Fields of view narrower than this extent (radians, the square root of the solid angle:
-/// about a 115° × 115° perspective view) get the pencil method under `method = "auto"`,
-/// wider ones the combined method. Forward-looking perspective cameras see the rows
-/// converge in front of them, where the pencil's profile around the vanishing point holds
-/// on real crop images; the omnidirectional lenses see them all around and keep the
-/// paper's combined method (docs/real.md).
+/// about a 115° × 115° perspective view) get the strips method under `method = "auto"`
+/// (the pencil when the mounting does not look forward), wider ones the combined method.
+/// Forward-looking perspective cameras see the rows converge in front of them, where the
+/// strips' peaks lined up through the vanishing point hold on real crop images; the
+/// omnidirectional lenses see them all around and keep the paper's combined method
+/// (docs/real.md).
 pub const NARROW_EXTENT_RAD: f64 = 2.0;
 
-/// The method `auto` stands for on a field of view of `a`'s extent.
-pub fn auto_method(a: &AngularResolution) -> Method {
-    if a.extent_rad < NARROW_EXTENT_RAD {
-        Method::Pencil
-    } else {
+/// The method `auto` stands for on a field of view of `a`'s extent, mounted as `m`.
+pub fn auto_method(a: &AngularResolution, m: &crate::camera::Mounting) -> Method {
+    if a.extent_rad >= NARROW_EXTENT_RAD {
         Method::Combined
+    } else if super::strips::looks_forward(m) {
+        Method::Strips
+    } else {
+        Method::Pencil
     }
 }
 
+/// `opts` with every angular option left absent set for `cal`: its reference value times
+/// the factor (`opts.angle_scale`, else derived from the calibration's field of view),
+/// accumulator sizes rounded to whole cells. Options given explicitly are kept.
 pub fn resolve(
     cal: &Calibration,
     opts: &DetectorOptions,
@@ -178,7 +181,7 @@ pub fn resolve(
     let angle = |reference: f64| reference * factor;
     let mut o = opts.clone();
     if o.method == Method::Auto {
-        o.method = auto_method(&resolution);
+        o.method = auto_method(&resolution, &cal.mounting);
     }
     let h = &mut o.hough;
     h.phi_bins.get_or_insert(bins(REFERENCE_BINS));

@@ -246,8 +246,7 @@ impl StripsRows {
         let rot = mounting.robot_from_camera().inverse();
         let fwd = rot * Vector3::x();
         let up = rot * Vector3::z();
-        // the camera looks along −z: the robot's forward axis must be in front of it
-        if -fwd.z < 0.2 {
+        if !looks_forward(mounting) {
             return Err(DetectError::Options(format!(
                 "method strips needs a forward-looking camera: the robot's forward axis is \
                  {:.0}° from the optical axis with this mounting (pitch_deg {}, roll_deg {}, \
@@ -687,6 +686,13 @@ impl StripsRows {
     }
 }
 
+/// Whether a camera mounted as `m` looks forward enough for the strips method: the
+/// robot's forward axis within about 78° of the optical axis (the camera looks along −z).
+pub fn looks_forward(m: &Mounting) -> bool {
+    let fwd = m.robot_from_camera().inverse() * Vector3::x();
+    -fwd.z >= 0.2
+}
+
 /// How many different strips the peaks (sorted by u) come from.
 fn distinct_strips(on: &[Seen]) -> usize {
     let mut n = 0;
@@ -743,7 +749,7 @@ mod tests {
             normals.push(a.cross(&b).normalize());
             for _ in 0..3000 {
                 // forward distances spread like the image's rows (denser far away)
-                let x = 1.0 / (1.0 / 1.0 - rnd() * (1.0 / 1.0 - 1.0 / 40.0));
+                let x = 1.0 / (1.0 - rnd() * (1.0 - 1.0 / 40.0));
                 let p = cam_from_robot * (yaw * Vector3::new(x, y + (rnd() - 0.5) * 0.08, -h));
                 let r = p.normalize();
                 if -r.z <= 0.05 {
