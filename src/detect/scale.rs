@@ -257,8 +257,13 @@ pub fn scales_report(cal: &Calibration, opts: &DetectorOptions) -> Result<String
                 "at least"
             };
             format!(
-                " (auto: the field of view's extent {:.3} rad is {side} {NARROW_EXTENT_RAD} rad)",
-                a.extent_rad
+                " (auto: the field of view's extent {:.3} rad is {side} {NARROW_EXTENT_RAD} rad{})",
+                a.extent_rad,
+                match opts.method {
+                    Method::Strips => ", the camera looks forward",
+                    Method::Pencil => ", the camera does not look forward",
+                    _ => "",
+                }
             )
         } else {
             " (the configuration's)".into()
@@ -307,6 +312,11 @@ pub fn scales_report(cal: &Calibration, opts: &DetectorOptions) -> Result<String
         ("pencil.search_step_px", pe.search_step_px),
         ("pencil.min_separation_px", pe.min_separation_px),
         ("pencil.smooth_px", pe.smooth_px),
+        ("strips.strip_px", opts.strips.strip_px),
+        ("strips.smooth_px", opts.strips.smooth_px),
+        ("strips.peak_sigma_px", opts.strips.peak_sigma_px),
+        ("strips.search_step_px", opts.strips.search_step_px),
+        ("strips.min_depth_px", opts.strips.min_depth_px),
     ] {
         line(format!("  {name:<28} {l:>7.2} px = {:>7.3} deg", deg(l)));
     }
