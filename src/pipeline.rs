@@ -1119,10 +1119,14 @@ mod tests {
         let out = got.lock().unwrap().clone();
         assert_eq!(st.frames_in, 300);
         let a = allocations.load(Ordering::Relaxed);
-        // In flight at most: the frame queue, one per worker, the estimate queue and the
-        // latest frame; everything else must come back to the pool.
+        // In flight: the frame queue, one per worker, the estimate queue, the latest frame and
+        // the one being filled (2 + 2 + 8 + 2 + 1 = 15); a thread preempted between taking a
+        // buffer and handing one back holds a few more on a loaded machine (18 seen at load
+        // average 7 on 2 cores). Without recycling it would be one per frame, 300.
+        let o = PipelineOptions::default();
+        let in_flight = o.frame_queue + 2 + o.estimate_queue + 3;
         assert!(
-            a <= 16,
+            a as usize <= 2 * in_flight,
             "{a} buffers allocated for 300 frames: not recycled"
         );
         assert!(

@@ -649,37 +649,29 @@ impl Detector {
         edge: bool,
     ) -> Result<(), DetectError> {
         self.last_pencil = PencilResult::default();
-        if self.opts.method == Method::Strips {
-            self.run_strips(out)?;
-            let t2 = Instant::now();
-            self.times = StageTimes {
-                prepare: t1 - t0,
-                hough: t2 - t1,
-                edge: Duration::ZERO,
-                vanishing: Duration::ZERO,
-            };
-            return Ok(());
+        match self.opts.method {
+            Method::Strips => self.run_strips(out)?,
+            Method::Pencil => {
+                // the combined method's vanishing point, one more candidate for the pencil's
+                let seed = if self.opts.pencil.seed_with_combined {
+                    self.detect_with(Method::Combined, out, t0, t1, edge)?;
+                    out.vanishing_point.map(|v| v.direction)
+                } else {
+                    None
+                };
+                out.rows.clear();
+                self.run_pencil(seed, out)?;
+            }
+            _ => return self.detect_with(self.opts.method, out, t0, t1, edge),
         }
-        if self.opts.method == Method::Pencil {
-            // the combined method's vanishing point, one more candidate for the pencil's
-            let seed = if self.opts.pencil.seed_with_combined {
-                self.detect_with(Method::Combined, out, t0, t1, edge)?;
-                out.vanishing_point.map(|v| v.direction)
-            } else {
-                None
-            };
-            out.rows.clear();
-            self.run_pencil(seed, out)?;
-            let t2 = Instant::now();
-            self.times = StageTimes {
-                prepare: t1 - t0,
-                hough: t2 - t1,
-                edge: Duration::ZERO,
-                vanishing: Duration::ZERO,
-            };
-            return Ok(());
-        }
-        self.detect_with(self.opts.method, out, t0, t1, edge)
+        // the strips' and the pencil's search counts as the Hough stage
+        self.times = StageTimes {
+            prepare: t1 - t0,
+            hough: Instant::now() - t1,
+            edge: Duration::ZERO,
+            vanishing: Duration::ZERO,
+        };
+        Ok(())
     }
 
     /// The Hough, edge or combined `method`'s rows and vanishing point (as
