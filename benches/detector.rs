@@ -72,6 +72,23 @@ fn bench(c: &mut Criterion) {
                     .unwrap()
             })
         });
+        for (label, p) in [("full", None), ("narrowed", Some(&prior))] {
+            let a = thread_cpu_ns();
+            for _ in 0..20 {
+                det.process_with_prior(&view, p, &mut out).unwrap();
+            }
+            if let (Some(a), Some(b)) = (a, thread_cpu_ns()) {
+                let t = det.last_times();
+                println!(
+                    "{name} 2448x2050 {label}: {:.2} ms CPU per frame ({:?}, {} rows; last frame: prepare {:.2} ms, hough + refit {:.2} ms wall)",
+                    (b - a) as f64 / 20.0 / 1e6,
+                    det.last_prior(),
+                    out.rows.len(),
+                    t.prepare.as_secs_f64() * 1e3,
+                    t.hough.as_secs_f64() * 1e3,
+                );
+            }
+        }
         // Stages on the same buffers.
         let mut veg = GreyImage::default();
         // Filled once here so that each stage has its input even when a filter skips the

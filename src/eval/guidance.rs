@@ -205,9 +205,32 @@ pub fn run_drive(
         let truth_off = t.path_offset_m(path);
         let time = seq as f64 / s.drive.fps;
         score.series.push((time, truth_off, g.lateral_offset_m));
+        let own = est.row_fit.as_ref();
+        tracing::trace!(
+            drive = s.name,
+            seq,
+            truth_end_m = ?t.end_of_rows_m,
+            no_crop = t.no_crop,
+            frame_end_m = ?own.and_then(|f| f.end_of_rows_m),
+            frame_crop_near = ?own.map(|f| f.crop_near),
+            end_m = ?g.end_of_row_m,
+            crop = ?g.crop,
+            status = ?est.status,
+            "frame"
+        );
         if t.no_crop {
             score.empty_frames += 1;
             score.empty_reported += usize::from(g.crop != CropState::Rows);
+            if g.crop == CropState::Rows {
+                tracing::debug!(
+                    drive = s.name,
+                    seq,
+                    truth_end_m = ?t.end_of_rows_m,
+                    frame_crop_near = ?own.map(|f| f.crop_near),
+                    frame_end_m = ?own.and_then(|f| f.end_of_rows_m),
+                    "empty-stretch frame not reported"
+                );
+            }
         }
         if let Some(end) = t.end_of_rows_m.filter(|e| (0.3..=5.0).contains(e)) {
             match g.end_of_row_m {
@@ -215,7 +238,17 @@ pub fn run_drive(
                     let err = (e - end).abs();
                     score.end_max_err_m = Some(score.end_max_err_m.map_or(err, |m| m.max(err)));
                 }
-                None => score.end_missed += 1,
+                None => {
+                    score.end_missed += 1;
+                    tracing::debug!(
+                        drive = s.name,
+                        seq,
+                        truth_end_m = end,
+                        frame_end_m = ?own.and_then(|f| f.end_of_rows_m),
+                        status = ?est.status,
+                        "end of the rows due but not reported"
+                    );
+                }
             }
         }
         let Some(off) = g.lateral_offset_m else {

@@ -283,7 +283,7 @@ pub struct GuidanceEstimate {
     /// nearest the line it follows; −1: it follows the line to its right).
     pub row_index: Option<i64>,
     /// Distance ahead along the rows from base_link's origin to where the rows end (the last
-    /// plant), metres, once within 5 m (`None`: not seen ending there).
+    /// plant), metres, once within [`rowfit::END_RANGE_M`] (5.5 m; `None`: not seen ending there).
     pub end_of_row_m: Option<f64>,
     /// What crop the frame shows around the robot.
     #[serde(default)]
@@ -826,6 +826,46 @@ mod tests {
         );
         assert!(out.roll_rad.is_none());
         assert!((out.frame.unwrap().lateral_offset_m - 0.05).abs() > 0.01);
+    }
+
+    #[test]
+    fn the_end_is_published_from_the_first_frame_it_is_5_m_ahead() {
+        // 1 m/s at 15 fps towards the rows' end, 7 m ahead at first; each frame measures it
+        // at the far edge of its 0.2 m bin, as the row fit does, so the track runs a little
+        // high as the end crosses 5 m
+        let mut g = Guidance::new(GuidanceOptions::default(), Mounting::default()).unwrap();
+        let mut out = GuidanceEstimate::default();
+        let (vp, normals) = view(0.0, 0.0, 0.0, 0.3, 1.0, 0.5, -5..=5);
+        let mut due = 0;
+        for i in 0..100u64 {
+            let truth = 7.0 - i as f64 / 15.0;
+            let fit = RowFitMeasurement {
+                curvature_per_m: None,
+                sd_per_m: 0.0,
+                points: 1000,
+                end_of_rows_m: Some((truth / 0.2 - 1e-9).ceil() * 0.2),
+                crop_near: true,
+                shift_m: 0.0,
+                turn: 0.0,
+                shift_sd_m: 0.0,
+            };
+            g.update(
+                1 + i * 66_666_667,
+                Some(vp),
+                normals.iter().copied(),
+                Some(&fit),
+                &mut out,
+            );
+            if (0.3..=5.0).contains(&truth) {
+                due += 1;
+                let e = out.end_of_row_m;
+                assert!(
+                    e.is_some_and(|e| (e - truth).abs() <= 0.5),
+                    "frame {i}: end {truth:.3} m ahead, published {e:?}"
+                );
+            }
+        }
+        assert!(due > 60, "{due}");
     }
 
     #[test]

@@ -121,8 +121,11 @@ const END_EMPTY_M: f64 = 2.4;
 /// Farthest end of the rows measured in one frame, metres ahead (and behind, once past); the
 /// guidance publishes it within [`END_RANGE_M`] and confirms it over frames before that.
 pub const END_MEASURE_M: f64 = 8.0;
-/// Farthest end of the rows published, metres ahead (and behind, once past).
-pub const END_RANGE_M: f64 = 5.0;
+/// Farthest end of the rows published, metres ahead (and behind, once past): the 5 m within
+/// which a steering controller needs it, plus the 0.5 m it may be off. The tracked end comes
+/// from 0.2 m bins and trails the truth by up to a bin; cut at exactly 5 m, the first frames
+/// with the end 5 m ahead went without it (issue 14's 10-minute drive).
+pub const END_RANGE_M: f64 = 5.5;
 /// Along the rows, ahead and behind, within which plants make [`RowFitMeasurement::crop_near`].
 pub const NEAR_M: f64 = 3.0;
 
