@@ -17,6 +17,7 @@
 //! points' pixels), so that the same image through any focal length gives the same rows.
 
 use super::comb::{fit_peak_comb_rolled, CombSearch, RolledComb, TanAxis};
+use super::pose::RobotAxes;
 use super::{DetectError, Method, Row};
 use crate::camera::Mounting;
 use crate::sphere::Scatter;
@@ -265,9 +266,7 @@ pub struct PencilResult {
 pub struct PencilRows {
     opts: PencilOptions,
     max_tilt: f64,
-    fwd: Vector3<f64>,
-    left: Vector3<f64>,
-    up: Vector3<f64>,
+    axes: RobotAxes,
     hist: Vec<f64>,
     smooth: Vec<f64>,
     prefix: Vec<f64>,
@@ -319,13 +318,10 @@ impl PencilRows {
         mounting: &Mounting,
     ) -> Result<Self, DetectError> {
         opts.validate()?;
-        let rot = mounting.robot_from_camera().inverse();
         Ok(PencilRows {
             opts,
             max_tilt: max_tilt_deg.to_radians(),
-            fwd: rot * Vector3::x(),
-            left: rot * Vector3::y(),
-            up: rot * Vector3::z(),
+            axes: RobotAxes::new(mounting),
             hist: Vec::new(),
             smooth: Vec::new(),
             prefix: Vec::new(),
@@ -352,7 +348,7 @@ impl PencilRows {
 
     /// The direction at azimuth `az` (from forward towards left) and elevation `el`.
     fn direction(&self, az: f64, el: f64) -> Vector3<f64> {
-        (self.fwd * az.cos() + self.left * az.sin()) * el.cos() + self.up * el.sin()
+        self.axes.direction(az, el)
     }
 
     /// The image's scales from its points: `pixel_rad[i]` is the angular size of point i's
@@ -370,8 +366,8 @@ impl PencilRows {
             _ => return PencilScales::default(),
         };
         // d(tan ψ)/d(pixel across the pencil) = pixel angle · (1 + tan²ψ) / sin(angle to v).
-        let v = self.fwd;
-        let Some((e1, e2)) = pencil_frame(&v, &-self.up) else {
+        let v = self.axes.fwd;
+        let Some((e1, e2)) = pencil_frame(&v, &-self.axes.up) else {
             return PencilScales::default();
         };
         self.tans.clear();
@@ -401,7 +397,7 @@ impl PencilRows {
         stride: usize,
         bw: f64,
     ) -> bool {
-        let Some((e1, e2)) = pencil_frame(v, &-self.up) else {
+        let Some((e1, e2)) = pencil_frame(v, &-self.axes.up) else {
             return false;
         };
         let m = self.opts.max_tan;
@@ -655,9 +651,9 @@ impl PencilRows {
 
     /// Azimuth and elevation of a direction (either sign: the one pointing forward).
     fn az_el(&self, v: &Vector3<f64>) -> (f64, f64) {
-        let v = if v.dot(&self.fwd) < 0.0 { -v } else { *v };
-        let el = v.dot(&self.up).clamp(-1.0, 1.0).asin();
-        let az = v.dot(&self.left).atan2(v.dot(&self.fwd));
+        let v = if v.dot(&self.axes.fwd) < 0.0 { -v } else { *v };
+        let el = v.dot(&self.axes.up).clamp(-1.0, 1.0).asin();
+        let az = v.dot(&self.axes.left).atan2(v.dot(&self.axes.fwd));
         (az, el)
     }
 
@@ -819,7 +815,7 @@ impl PencilRows {
                 }
             }
         }
-        let Some((e1, e2)) = pencil_frame(v, &-self.up) else {
+        let Some((e1, e2)) = pencil_frame(v, &-self.axes.up) else {
             return 0;
         };
         let m = self.opts.max_tan;

@@ -25,6 +25,31 @@ pub struct HeadingTilt {
     pub direction_robot: Vector3<f64>,
 }
 
+/// The robot's axes (REP 103) in the camera frame, through the mounting.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RobotAxes {
+    pub fwd: Vector3<f64>,
+    pub left: Vector3<f64>,
+    pub up: Vector3<f64>,
+}
+
+impl RobotAxes {
+    pub fn new(mounting: &Mounting) -> Self {
+        let rot = mounting.robot_from_camera().inverse();
+        RobotAxes {
+            fwd: rot * Vector3::x(),
+            left: rot * Vector3::y(),
+            up: rot * Vector3::z(),
+        }
+    }
+
+    /// The camera-frame direction at heading `az` (from forward towards left) and
+    /// elevation `el` (radians): the inverse of [`heading_tilt`].
+    pub fn direction(&self, az: f64, el: f64) -> Vector3<f64> {
+        (self.fwd * az.cos() + self.left * az.sin()) * el.cos() + self.up * el.sin()
+    }
+}
+
 /// Heading and tilt from a vanishing point (camera frame, any sign, any length > 0).
 pub fn heading_tilt(vp_camera: &Vector3<f64>, mounting: &Mounting) -> HeadingTilt {
     let mut d = mounting.robot_from_camera() * vp_camera.normalize();

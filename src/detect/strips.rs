@@ -20,6 +20,7 @@
 //! plant edges, shadows) are not rows. Every length is in pixels of that virtual image, so the
 //! same scene through any focal length gives the same rows.
 
+use super::pose::RobotAxes;
 use super::{DetectError, Method, Row};
 use crate::camera::Mounting;
 use nalgebra::Vector3;
@@ -209,9 +210,7 @@ struct Seen {
 pub struct StripsRows {
     opts: StripsOptions,
     max_tilt: f64,
-    fwd: Vector3<f64>,
-    left: Vector3<f64>,
-    up: Vector3<f64>,
+    axes: RobotAxes,
     /// Unit image directions (row, column) of "below the horizon" and "along it".
     e_p: [f64; 2],
     e_a: [f64; 2],
@@ -224,8 +223,8 @@ pub struct StripsRows {
     scratch: Vec<f64>,
     peaks: Vec<Peak>,
     seen: Vec<Seen>,
-    /// The comb's teeth that are rows: u and weight.
-    teeth: Vec<[f64; 2]>,
+    /// The comb's teeth that are rows: u, weight and the number of peaks on them.
+    teeth: Vec<[f64; 3]>,
     last: StripsResult,
 }
 
@@ -243,9 +242,8 @@ impl StripsRows {
         mounting: &Mounting,
     ) -> Result<Self, DetectError> {
         opts.validate()?;
-        let rot = mounting.robot_from_camera().inverse();
-        let fwd = rot * Vector3::x();
-        let up = rot * Vector3::z();
+        let axes = RobotAxes::new(mounting);
+        let (fwd, up) = (axes.fwd, axes.up);
         if !looks_forward(mounting) {
             return Err(DetectError::Options(format!(
                 "method strips needs a forward-looking camera: the robot's forward axis is \
@@ -278,9 +276,7 @@ impl StripsRows {
         Ok(StripsRows {
             opts,
             max_tilt: max_tilt_deg.to_radians(),
-            fwd,
-            left: rot * Vector3::y(),
-            up,
+            axes,
             e_p,
             e_a: [-e_p[1], e_p[0]],
             scale: 0.0,
@@ -501,8 +497,7 @@ impl StripsRows {
             (h, 0.0),
             (h, t),
         ] {
-            let d = (self.fwd * az.cos() + self.left * az.sin()) * el.cos() + self.up * el.sin();
-            let [a, p] = self.to_virtual(&d)?;
+            let [a, p] = self.to_virtual(&self.axes.direction(az, el))?;
             a0 = a0.min(a);
             a1 = a1.max(a);
             p0 = p0.min(p);
@@ -657,7 +652,7 @@ impl StripsRows {
             let on = &self.seen[lo..hi];
             if distinct_strips(on) >= o.min_strips {
                 let w: f64 = on.iter().map(|x| x.w).sum();
-                self.teeth.push([m, w]);
+                self.teeth.push([m, w, on.len() as f64]);
             }
         }
         // the best-supported teeth, at most max_rows, reported in order across the image
@@ -666,20 +661,14 @@ impl StripsRows {
             self.teeth.truncate(o.max_rows);
         }
         let depth = 100.0_f64.max(2.0 * o.min_depth_px);
-        for &[m, _] in &self.teeth {
-            let lo = self
-                .seen
-                .partition_point(|x| x.u < m - o.comb_band * period);
-            let hi = self
-                .seen
-                .partition_point(|x| x.u <= m + o.comb_band * period);
+        for &[m, _, support] in &self.teeth {
             let n = vp.cross(&self.to_ray(a + m * depth, p + depth));
             let norm = n.norm();
             if norm > 0.0 {
                 rows.push(Row {
                     normal: n / norm,
                     method: Method::Strips,
-                    support: (hi - lo) as u32,
+                    support: support as u32,
                 });
             }
         }
@@ -689,8 +678,7 @@ impl StripsRows {
 /// Whether a camera mounted as `m` looks forward enough for the strips method: the
 /// robot's forward axis within about 78° of the optical axis (the camera looks along −z).
 pub fn looks_forward(m: &Mounting) -> bool {
-    let fwd = m.robot_from_camera().inverse() * Vector3::x();
-    -fwd.z >= 0.2
+    -RobotAxes::new(m).fwd.z >= 0.2
 }
 
 /// How many different strips the peaks (sorted by u) come from.
