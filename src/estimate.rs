@@ -297,6 +297,7 @@ mod tests {
             normal: Vector3::x(),
             method: Method::Hough,
             support: 10,
+            width_rad: 0.0,
         };
         d.rows = vec![row, row];
         assert_eq!(

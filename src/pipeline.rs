@@ -975,6 +975,7 @@ mod tests {
                 normal: Vector3::z(),
                 method: Method::Hough,
                 support: view.data[0] as u32,
+                width_rad: 0.0,
             });
             Ok(())
         }

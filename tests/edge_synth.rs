@@ -1,10 +1,11 @@
 //! The edge and combined methods on rendered synthetic fields (both shipped lenses), fixed
-//! seeds, loose margins: the edge method finds both boundaries of the rows, its rows pass
-//! through the true vanishing point, and every method finds the vanishing point.
+//! seeds, loose margins: the edge method finds both boundaries of the rows and publishes
+//! their centre lines with the rows' widths, the combined method publishes the Hough centre
+//! lines (never a boundary), and every method finds the vanishing point.
 
 use nalgebra::Vector3;
 use omnirow::camera::{ideal_fisheye, ideal_pal, Calibration};
-use omnirow::detect::{Detection, Detector, DetectorOptions, Method};
+use omnirow::detect::{Detection, Detector, DetectorOptions, Method, Row};
 use omnirow::frame::ImageView;
 use omnirow::sphere::axis_angle;
 use omnirow::synth::{random_scene, render, GroundTruth, Protocol, SynthImage};
@@ -14,6 +15,15 @@ fn scene(cal: &Calibration, seed: u64) -> (SynthImage, GroundTruth) {
 }
 
 fn detect(cal: &Calibration, method: Method, img: &SynthImage) -> Detection {
+    detect_with_boundaries(cal, method, img).0
+}
+
+/// The detection and the edge method's boundaries behind it.
+fn detect_with_boundaries(
+    cal: &Calibration,
+    method: Method,
+    img: &SynthImage,
+) -> (Detection, Vec<Row>) {
     let mut d = Detector::new(
         cal,
         DetectorOptions {
@@ -25,7 +35,8 @@ fn detect(cal: &Calibration, method: Method, img: &SynthImage) -> Detection {
     let view = ImageView::new(img.width, img.height, img.format, &img.data).unwrap();
     let mut out = Detection::default();
     d.process(&view, &mut out).unwrap();
-    out
+    let boundaries = d.last_boundaries().to_vec();
+    (out, boundaries)
 }
 
 fn check_lens(name: &str, cal: Calibration, seed: u64) {
@@ -37,24 +48,18 @@ fn check_lens(name: &str, cal: Calibration, seed: u64) {
         .map(|n| Vector3::from(*n))
         .collect();
 
-    // Edge rows: most of the support lies on rows through the true vanishing point (within
-    // about two pixels' angle at this resolution), close to a true row (a boundary is a few
-    // centimetres from the row's centre line).
-    let edge = detect(&cal, Method::Edge, &img);
-    assert!(edge.rows.iter().all(|r| r.method == Method::Edge));
+    // Edge boundaries: most of the support lies on rows through the true vanishing point
+    // (within about two pixels' angle at this resolution), close to a true row (a boundary
+    // is a few centimetres from the row's centre line).
+    let (edge, boundaries) = detect_with_boundaries(&cal, Method::Edge, &img);
     let mut hits = vec![0usize; normals.len()];
     let (mut on, mut total) = (0u32, 0u32);
-    for r in &edge.rows {
+    for r in &boundaries {
         total += r.support;
         if r.normal.dot(&vp).abs() > 0.012 {
             continue;
         }
-        let (i, a) = normals
-            .iter()
-            .enumerate()
-            .map(|(i, n)| (i, axis_angle(n, &r.normal)))
-            .min_by(|a, b| a.1.total_cmp(&b.1))
-            .unwrap();
+        let (i, a) = nearest(&normals, &r.normal);
         if a < 0.06 {
             hits[i] += 1;
             on += r.support;
@@ -62,11 +67,33 @@ fn check_lens(name: &str, cal: Calibration, seed: u64) {
     }
     let both = hits.iter().filter(|&&h| h >= 2).count();
     eprintln!(
-        "{name} seed {seed}: {} edge rows, {:.0}% of support on true rows, {} of {} true rows with two boundaries",
-        edge.rows.len(),
+        "{name} seed {seed}: {} edge boundaries, {:.0}% of support on true rows, {} of {} true rows with two boundaries",
+        boundaries.len(),
         100.0 * on as f64 / total.max(1) as f64,
         both,
         normals.len()
+    );
+    // Published: centre lines, each nearer a true row than its boundaries are, with a
+    // width; at least one per row whose two boundaries were found, less one.
+    assert!(edge.rows.iter().all(|r| r.method == Method::Edge));
+    let mut centred = vec![false; normals.len()];
+    for r in &edge.rows {
+        let (i, a) = nearest(&normals, &r.normal);
+        assert!(
+            a < 0.03 && r.width_rad > 0.0 && r.width_rad < 0.2,
+            "{name}: a published edge row {a:.4} rad from the nearest true row, width {:.4}",
+            r.width_rad
+        );
+        centred[i] = true;
+    }
+    let centred = centred.iter().filter(|&&c| c).count();
+    eprintln!(
+        "{name} seed {seed}: {} edge centre lines on {centred} true rows",
+        edge.rows.len()
+    );
+    assert!(
+        centred >= 4 && 4 * centred >= 3 * both,
+        "{name}: centre lines on {centred} true rows, {both} rows with two boundaries"
     );
     assert!(
         on * 2 > total,
@@ -94,11 +121,21 @@ fn check_lens(name: &str, cal: Calibration, seed: u64) {
         );
         assert!(e < 3e-3, "{name} {}: vp error {e} rad", m.name());
         if m == Method::Combined {
-            for want in [Method::Hough, Method::Edge] {
-                assert!(det.rows.iter().any(|r| r.method == want));
-            }
+            // the Hough centre lines, several with their width from the boundaries
+            assert!(det.rows.iter().all(|r| r.method == Method::Hough));
+            assert!(det.rows.iter().filter(|r| r.width_rad > 0.0).count() >= 2);
         }
     }
+}
+
+/// The true row nearest a normal, and the angle between them.
+fn nearest(normals: &[Vector3<f64>], n: &Vector3<f64>) -> (usize, f64) {
+    normals
+        .iter()
+        .enumerate()
+        .map(|(i, t)| (i, axis_angle(t, n)))
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .unwrap()
 }
 
 #[test]

@@ -420,6 +420,7 @@ impl Processor for MeanRow {
             normal: nalgebra::Vector3::z(),
             method: Method::Hough,
             support: (sum / w as u64) as u32 + 1,
+            width_rad: 0.0,
         });
         Ok(())
     }

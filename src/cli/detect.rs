@@ -86,6 +86,7 @@ struct RowJson {
     normal: [f64; 3],
     method: &'static str,
     support: u32,
+    width_rad: f64,
 }
 
 #[derive(Serialize)]
@@ -205,6 +206,7 @@ pub fn run(args: DetectArgs) -> anyhow::Result<ExitCode> {
                             normal: [r.normal.x, r.normal.y, r.normal.z],
                             method: r.method.name(),
                             support: r.support,
+                            width_rad: r.width_rad,
                         })
                         .collect(),
                     quality: det.quality,

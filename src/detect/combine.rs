@@ -371,6 +371,7 @@ pub fn pair_edge_rows(
                     normal: c / norm,
                     method: Method::Combined,
                     support: rows[l].support.saturating_add(rows[r].support),
+                    width_rad: 0.0,
                 });
                 out_inliers.push(true);
                 psi[jl].2 = Kind::Paired;
@@ -491,6 +492,7 @@ mod tests {
                     normal: (n + vp * off).normalize(),
                     method,
                     support,
+                    width_rad: 0.0,
                 }
             })
             .collect()

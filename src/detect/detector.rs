@@ -11,6 +11,7 @@
 //! (paper II-F, eq. 5: edge rows weighted w·support, Hough rows (1−w)·support, in one
 //! vanishing-point Hough).
 
+use super::centre::CentreLines;
 use super::combine::{consensus_score, pair_edge_rows, precision_fit, EDGE_PAIR_FACTOR};
 use super::edge::{EdgeDetector, EdgeError, EdgeResult};
 use super::hough::{HoughResult, HoughRows};
@@ -496,6 +497,10 @@ pub struct Detector {
     final_inliers: Vec<bool>,
     paired_rows: Vec<Row>,
     paired_inliers: Vec<bool>,
+    /// The crop rows' centre lines from the edge boundaries ([`super::centre`]), and the
+    /// last image's boundaries (evidence, not published).
+    centre: CentreLines,
+    boundaries: Vec<Row>,
     pair_scratch: Vec<(f64, usize, super::combine::Kind)>,
     times: StageTimes,
     last_prepare: PrepareResult,
@@ -565,6 +570,8 @@ impl Detector {
             final_inliers: Vec::with_capacity(128),
             paired_rows: Vec::with_capacity(128),
             paired_inliers: Vec::with_capacity(128),
+            centre: CentreLines::default(),
+            boundaries: Vec::with_capacity(128),
             pair_scratch: Vec::with_capacity(128),
             times: StageTimes::default(),
             last_prepare: PrepareResult::default(),
@@ -757,6 +764,9 @@ impl Detector {
                 r.method != Method::Edge || v.is_some_and(|v| r.normal.dot(&v).abs() < sin_tol)
             });
         }
+        if method != Method::Hough {
+            self.publish_centre_lines(out);
+        }
         let t4 = Instant::now();
         self.times = StageTimes {
             prepare: t1 - t0,
@@ -765,6 +775,38 @@ impl Detector {
             vanishing: t4 - t3,
         };
         Ok(())
+    }
+
+    /// The edge and combined methods publish crop rows' centre lines, not boundaries
+    /// ([`super::centre`]): the edge rows through the vanishing point become the widths of
+    /// the Hough rows, or pair into centre lines; the boundaries stay readable in
+    /// [`Self::last_boundaries`]. Without a vanishing point no boundary is published.
+    fn publish_centre_lines(&mut self, out: &mut Detection) {
+        self.boundaries.clear();
+        self.boundaries
+            .extend(out.rows.iter().filter(|r| r.method == Method::Edge));
+        let Some(vp) = out.vanishing_point.map(|v| v.direction) else {
+            out.rows.retain(|r| r.method != Method::Edge);
+            return;
+        };
+        // only rows through the vanishing point are crop rows of this field
+        let sin_tol = self.opts.vanishing.inlier_deg().to_radians().sin();
+        out.rows
+            .retain(|r| r.method != Method::Edge || r.normal.dot(&vp).abs() < sin_tol);
+        let max_half = self.opts.combined.pair_max_deg().to_radians();
+        self.centre.publish(
+            &mut out.rows,
+            &vp,
+            max_half,
+            &self.points.rays,
+            &self.points.weights,
+        );
+    }
+
+    /// The edge method's boundary rows of the last image (edge and combined methods): the
+    /// evidence behind the published centre lines.
+    pub fn last_boundaries(&self) -> &[Row] {
+        &self.boundaries
     }
 
     /// Replaces `out`'s vanishing point by a refitted one and derives heading and tilt

@@ -605,6 +605,7 @@ impl HoughRows {
                 normal: canonical(&n),
                 method: Method::Hough,
                 support,
+                width_rad: 0.0,
             },
             tol,
         ))

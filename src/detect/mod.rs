@@ -4,6 +4,7 @@
 //! The stages (mask, vegetation, Hough, edge, vanishing point, pose) live in their own files;
 //! [`Detector`] owns their buffers and runs them in order (prepare → Hough → vanishing point).
 
+pub mod centre;
 pub mod comb;
 pub mod combine;
 pub mod detector;
@@ -116,6 +117,9 @@ pub struct Row {
     pub method: Method,
     /// Number of image points that support the row.
     pub support: u32,
+    /// The crop row's width: the angle around the vanishing point between its two
+    /// boundaries (radians), where the edge method found both; 0 where it was not measured.
+    pub width_rad: f64,
 }
 
 /// The common vanishing point of the rows.

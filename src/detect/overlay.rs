@@ -136,6 +136,7 @@ mod tests {
                 normal: Vector3::new(0.0, 1.0, 0.0),
                 method: Method::Hough,
                 support: 10,
+                width_rad: 0.0,
             }],
             vanishing_point: Some(VanishingPoint {
                 direction: Vector3::new(-1.0, 0.0, 0.0),

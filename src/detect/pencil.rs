@@ -841,6 +841,7 @@ impl PencilRows {
                 normal: crate::sphere::canonical(&n),
                 method: Method::Pencil,
                 support,
+                width_rad: 0.0,
             });
         }
         rows.len() - start

@@ -672,6 +672,7 @@ mod tests {
             normal: start,
             method: Method::Hough,
             support: 100,
+            width_rad: 0.0,
         }];
         let mut cand = Vec::new();
         // The row's edges here are one pixel sharp (no smoothing), where clipping the

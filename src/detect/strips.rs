@@ -669,6 +669,7 @@ impl StripsRows {
                     normal: n / norm,
                     method: Method::Strips,
                     support: support as u32,
+                    width_rad: 0.0,
                 });
             }
         }

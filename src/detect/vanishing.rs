@@ -424,6 +424,7 @@ mod tests {
                 normal: canonical(&(a * t.cos() + b * t.sin())),
                 method: Method::Hough,
                 support,
+                width_rad: 0.0,
             })
             .collect()
     }
@@ -447,6 +448,7 @@ mod tests {
             normal: Vector3::new(0.3, 0.5, 0.8).normalize(),
             method: Method::Hough,
             support: 900,
+            width_rad: 0.0,
         });
         let mut f =
             VanishingFinder::new(VanishingOptions::default(), 15.0, &Mounting::default()).unwrap();
@@ -522,6 +524,7 @@ mod tests {
                     normal: n.normalize(),
                     method: Method::Hough,
                     support: 100,
+                    width_rad: 0.0,
                 }
             })
             .collect();

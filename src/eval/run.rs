@@ -504,6 +504,7 @@ mod tests {
             normal: Vector3::from(n).normalize(),
             method: Method::Hough,
             support: 10,
+            width_rad: 0.0,
         };
         let det = Detection {
             rows: vec![

@@ -231,6 +231,7 @@ impl Merger {
                 normal: c.normal,
                 method: Method::Edge,
                 support,
+                width_rad: 0.0,
             });
         }
         result.rows = rows.len();

@@ -230,6 +230,7 @@ fn overlay(
                 normal: Vector3::from(*n),
                 method: r.method,
                 support: 0,
+                width_rad: 0.0,
             })
             .collect(),
         vanishing_point: o.vanishing_point.map(|d| VanishingPoint {
