@@ -43,6 +43,11 @@ pub struct StripsOptions {
     pub peak_sigma_px: f64,
     /// Step of the coarse grid of candidate vanishing points (then halved to 1 px).
     pub search_step_px: f64,
+    /// How many of the coarse grid's best local maxima are refined to 1 px.
+    pub search_starts: usize,
+    /// At each step of the search, the peaks' uncertainty is widened by this times the
+    /// step (0: `peak_sigma_px` at every step).
+    pub search_blur: f64,
     /// Largest heading of the rows from the robot's forward axis searched (degrees).
     pub max_heading_deg: f64,
     /// Peaks nearer the horizon than this (below the candidate vanishing point) take no
@@ -73,6 +78,8 @@ impl Default for StripsOptions {
             peak_fraction: 0.25,
             peak_sigma_px: 3.0,
             search_step_px: 8.0,
+            search_starts: 1,
+            search_blur: 0.0,
             max_heading_deg: 25.0,
             min_depth_px: 20.0,
             min_strips: 8,
@@ -118,6 +125,18 @@ impl StripsOptions {
             return bad(&format!(
                 "search_step_px = {} must be within 1..=200",
                 self.search_step_px
+            ));
+        }
+        if !(self.search_blur.is_finite() && (0.0..=10.0).contains(&self.search_blur)) {
+            return bad(&format!(
+                "search_blur = {} must be within 0..=10",
+                self.search_blur
+            ));
+        }
+        if !(1..=64).contains(&self.search_starts) {
+            return bad(&format!(
+                "search_starts = {} must be within 1..=64",
+                self.search_starts
             ));
         }
         if !(self.max_heading_deg.is_finite() && (0.0..80.0).contains(&self.max_heading_deg)) {
@@ -222,11 +241,26 @@ pub struct StripsRows {
     kernel: Vec<f64>,
     scratch: Vec<f64>,
     peaks: Vec<Peak>,
+    /// The coarse search's grid of agreements and the local maxima refined from it.
+    grid: Vec<f64>,
+    starts: Vec<(f64, f64, f64)>,
     seen: Vec<Seen>,
     /// The comb's teeth that are rows: u, weight and the number of peaks on them.
     teeth: Vec<[f64; 3]>,
     last: StripsResult,
 }
+
+/// The eight neighbours of a grid point, in steps.
+const NEIGHBOURS: [(f64, f64); 8] = [
+    (-1.0, -1.0),
+    (0.0, -1.0),
+    (1.0, -1.0),
+    (-1.0, 0.0),
+    (1.0, 0.0),
+    (-1.0, 1.0),
+    (0.0, 1.0),
+    (1.0, 1.0),
+];
 
 /// The most strips and profile bins an image may have (a hostile calibration or image
 /// cannot make the buffers grow without bound).
@@ -286,6 +320,8 @@ impl StripsRows {
             kernel: Vec::new(),
             scratch: Vec::new(),
             peaks: Vec::new(),
+            grid: Vec::new(),
+            starts: Vec::new(),
             seen: Vec::new(),
             teeth: Vec::new(),
             last: StripsResult::default(),
@@ -519,44 +555,77 @@ impl StripsRows {
         if na * np > 1_000_000 {
             return None;
         }
-        let mut best = (f64::MIN, 0.0, 0.0);
+        self.grid.clear();
         for j in 0..np {
             for i in 0..na {
-                let (a, p) = (a0 + i as f64 * step, p0 + j as f64 * step);
-                let e = self.agreement(a, p);
-                if e > best.0 {
-                    best = (e, a, p);
+                let e = self.agreement(
+                    a0 + i as f64 * step,
+                    p0 + j as f64 * step,
+                    self.sigma_at(step),
+                );
+                self.grid.push(e);
+            }
+        }
+        // the grid's best local maxima, each refined by halving steps
+        self.starts.clear();
+        for j in 0..np {
+            for i in 0..na {
+                let e = self.grid[j * na + i];
+                let higher = NEIGHBOURS.iter().any(|&(di, dj)| {
+                    let (x, y) = (i as i64 + di as i64, j as i64 + dj as i64);
+                    x >= 0
+                        && y >= 0
+                        && (x as usize) < na
+                        && (y as usize) < np
+                        && self.grid[y as usize * na + x as usize] > e
+                });
+                if e > 0.0 && !higher {
+                    self.starts
+                        .push((e, a0 + i as f64 * step, p0 + j as f64 * step));
                 }
             }
         }
-        let mut st = 0.5 * step;
-        while st >= 1.0 {
-            let (_, ca, cp) = best;
-            for (da, dp) in [
-                (-st, -st),
-                (0.0, -st),
-                (st, -st),
-                (-st, 0.0),
-                (st, 0.0),
-                (-st, st),
-                (0.0, st),
-                (st, st),
-            ] {
-                let e = self.agreement(ca + da, cp + dp);
-                if e > best.0 {
-                    best = (e, ca + da, cp + dp);
+        self.starts.sort_unstable_by(|x, y| y.0.total_cmp(&x.0));
+        self.starts.truncate(self.opts.search_starts);
+        let mut best = (f64::MIN, 0.0, 0.0);
+        for k in 0..self.starts.len() {
+            let mut here = self.starts[k];
+            let mut st = 0.5 * step;
+            while st >= 1.0 {
+                let (_, ca, cp) = here;
+                let sig = self.sigma_at(st);
+                if self.opts.search_blur > 0.0 {
+                    here.0 = self.agreement(ca, cp, sig);
                 }
+                for (da, dp) in NEIGHBOURS {
+                    let (a, p) = (ca + da * st, cp + dp * st);
+                    let e = self.agreement(a, p, sig);
+                    if e > here.0 {
+                        here = (e, a, p);
+                    }
+                }
+                st *= 0.5;
             }
-            st *= 0.5;
+            if here.0 > best.0 {
+                best = here;
+            }
         }
         (best.0 > 0.0).then_some((best.1, best.2, best.0))
     }
 
+    /// The peaks' position uncertainty for a search at grid step `step`: `peak_sigma_px`
+    /// widened by `search_blur` × the step, so that a coarse grid sees the broad basin
+    /// around the best point rather than missing its narrow summit.
+    fn sigma_at(&self, step: f64) -> f64 {
+        let o = &self.opts;
+        o.peak_sigma_px.hypot(o.search_blur * step)
+    }
+
     /// Fills `self.seen` with the peaks below the candidate (a, p), sorted by u; returns the
     /// share of the peaks' count that is there.
-    fn see(&mut self, a: f64, p: f64) -> f64 {
+    fn see(&mut self, a: f64, p: f64, sig: f64) -> f64 {
         self.seen.clear();
-        let (sig, min_d) = (self.opts.peak_sigma_px, self.opts.min_depth_px);
+        let min_d = self.opts.min_depth_px;
         for k in &self.peaks {
             let d = k.p - p;
             if d > min_d {
@@ -575,9 +644,9 @@ impl StripsRows {
     /// How well the peaks agree in u seen from (a, p): Σ over pairs of peaks from different
     /// strips of wᵢwⱼ·K(Δu / √(sᵢ² + sⱼ²)), over (Σw)², times the share of the peaks below
     /// the point. K is the triweight kernel with a standard deviation of 1.
-    fn agreement(&mut self, a: f64, p: f64) -> f64 {
+    fn agreement(&mut self, a: f64, p: f64, sig: f64) -> f64 {
         self.last.evaluated += 1;
-        let share = self.see(a, p);
+        let share = self.see(a, p, sig);
         if self.seen.len() < 4 {
             return 0.0;
         }
@@ -608,17 +677,18 @@ impl StripsRows {
         num / (total * total) * share
     }
 
-    /// The comb of the peaks' u seen from (a, p) and its teeth as rows into `rows`.
-    fn comb_rows(&mut self, a: f64, p: f64, rows: &mut Vec<Row>) {
-        self.see(a, p);
-        if self.seen.is_empty() {
-            return;
-        }
-        let o = self.opts;
+    /// The strongest comb of the peaks' u in `self.seen` (filled by `see`): (amplitude,
+    /// period, phase), the amplitude their Fourier component's over their total weight.
+    /// Periods from `comb_min_period` to `comb_max_period`.
+    fn comb(&self) -> (f64, f64, f64) {
+        let o = &self.opts;
         let total: f64 = self.seen.iter().map(|x| x.w).sum();
         let ratio = (o.comb_max_period / o.comb_min_period).powf(1.0 / (o.comb_periods - 1) as f64);
-        let mut best = (0.0, o.comb_min_period, 0.0);
         let mut period = o.comb_min_period;
+        let mut best = (0.0, period, 0.0);
+        if total <= 0.0 {
+            return best;
+        }
         for _ in 0..o.comb_periods {
             let (mut c, mut s) = (0.0, 0.0);
             let f = std::f64::consts::TAU / period;
@@ -633,6 +703,17 @@ impl StripsRows {
             }
             period *= ratio;
         }
+        best
+    }
+
+    /// The comb of the peaks' u seen from (a, p) and its teeth as rows into `rows`.
+    fn comb_rows(&mut self, a: f64, p: f64, rows: &mut Vec<Row>) {
+        self.see(a, p, self.opts.peak_sigma_px);
+        if self.seen.is_empty() {
+            return;
+        }
+        let o = self.opts;
+        let best = self.comb();
         let (amp, period, phase) = best;
         self.last.period = period;
         self.last.comb_strength = amp;
