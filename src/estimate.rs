@@ -54,6 +54,11 @@ pub struct RowEstimate {
     pub normal: [f64; 3],
     pub method: Method,
     pub support: u32,
+    /// The crop row's width, the angle between its boundaries around the vanishing point
+    /// (radians; 0 where not measured: only the edge and combined methods measure it).
+    /// Absent in estimates recorded before 2026-12-03 (read as 0).
+    #[serde(default)]
+    pub width_rad: f64,
 }
 
 /// Ground truth carried by synthetic frames, so the output can be checked live.
@@ -171,6 +176,7 @@ impl Estimate {
                 normal: r.normal.into(),
                 method: r.method,
                 support: r.support,
+                width_rad: r.width_rad,
             })
             .collect();
         e.quality = det.quality;
@@ -315,9 +321,24 @@ mod tests {
             Status::Degraded
         );
         d.quality = 0.9;
+        d.rows[1].width_rad = 0.05;
         let e = Estimate::from_detection(&f, &d, 1.0, 0.5);
         assert_eq!(e.status, Status::Ok);
         assert_eq!(e.vanishing_point, Some([0.0, 1.0, 0.0]));
+        assert_eq!((e.rows[0].width_rad, e.rows[1].width_rad), (0.0, 0.05));
+    }
+
+    #[test]
+    fn rows_recorded_without_a_width_read_as_zero() {
+        let r: RowEstimate =
+            serde_json::from_str(r#"{"normal":[1,0,0],"method":"hough","support":3}"#).unwrap();
+        assert_eq!(r.width_rad, 0.0);
+        let text = serde_json::to_string(&RowEstimate {
+            width_rad: 0.1,
+            ..r
+        })
+        .unwrap();
+        assert!(text.contains("\"width_rad\":0.1"), "{text}");
     }
 
     #[test]
