@@ -74,9 +74,9 @@ impl Default for StripsOptions {
     fn default() -> Self {
         StripsOptions {
             strip_px: 11.0,
-            smooth_px: 4.0,
-            peak_fraction: 0.25,
-            peak_sigma_px: 3.0,
+            smooth_px: 2.5,
+            peak_fraction: 0.15,
+            peak_sigma_px: 4.5,
             search_step_px: 8.0,
             search_starts: 1,
             search_blur: 0.0,
