@@ -147,6 +147,10 @@ pub struct Estimate {
     /// publisher; not published itself (guidance's `frame.curvature_per_m` is).
     #[serde(skip)]
     pub row_fit: Option<RowFitMeasurement>,
+    /// The edge boundaries' plane normals behind the rows ([`Detection::boundaries`]), on
+    /// their way to row guidance, which measures on them beside the rows; not published.
+    #[serde(skip)]
+    pub boundary_normals: Vec<[f64; 3]>,
 }
 
 impl Estimate {
@@ -180,6 +184,7 @@ impl Estimate {
             })
             .collect();
         e.quality = det.quality;
+        e.boundary_normals = det.boundaries.iter().map(|r| r.normal.into()).collect();
         e
     }
 
@@ -213,6 +218,7 @@ impl Estimate {
             }),
             guidance: None,
             row_fit: None,
+            boundary_normals: Vec::new(),
         }
     }
 
@@ -236,6 +242,7 @@ impl Estimate {
             truth: None,
             guidance: None,
             row_fit: None,
+            boundary_normals: Vec::new(),
         }
     }
 
@@ -250,7 +257,10 @@ impl Estimate {
         guidance.update(
             self.capture_ns,
             vp,
-            self.rows.iter().map(|r| r.normal),
+            self.rows
+                .iter()
+                .map(|r| r.normal)
+                .chain(self.boundary_normals.iter().copied()),
             self.row_fit.as_ref(),
             &mut out,
         );

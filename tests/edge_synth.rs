@@ -35,7 +35,7 @@ fn detect_with_boundaries(
     let view = ImageView::new(img.width, img.height, img.format, &img.data).unwrap();
     let mut out = Detection::default();
     d.process(&view, &mut out).unwrap();
-    let boundaries = d.last_boundaries().to_vec();
+    let boundaries = out.boundaries.clone();
     (out, boundaries)
 }
 

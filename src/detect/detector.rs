@@ -497,10 +497,8 @@ pub struct Detector {
     final_inliers: Vec<bool>,
     paired_rows: Vec<Row>,
     paired_inliers: Vec<bool>,
-    /// The crop rows' centre lines from the edge boundaries ([`super::centre`]), and the
-    /// last image's boundaries (evidence, not published).
+    /// The crop rows' centre lines from the edge boundaries ([`super::centre`]).
     centre: CentreLines,
-    boundaries: Vec<Row>,
     pair_scratch: Vec<(f64, usize, super::combine::Kind)>,
     times: StageTimes,
     last_prepare: PrepareResult,
@@ -571,7 +569,6 @@ impl Detector {
             paired_rows: Vec::with_capacity(128),
             paired_inliers: Vec::with_capacity(128),
             centre: CentreLines::default(),
-            boundaries: Vec::with_capacity(128),
             pair_scratch: Vec::with_capacity(128),
             times: StageTimes::default(),
             last_prepare: PrepareResult::default(),
@@ -656,6 +653,7 @@ impl Detector {
         edge: bool,
     ) -> Result<(), DetectError> {
         self.last_pencil = PencilResult::default();
+        out.boundaries.clear();
         match self.opts.method {
             Method::Strips => self.run_strips(out)?,
             Method::Pencil => {
@@ -667,6 +665,7 @@ impl Detector {
                     None
                 };
                 out.rows.clear();
+                out.boundaries.clear();
                 self.run_pencil(seed, out)?;
             }
             _ => return self.detect_with(self.opts.method, out, t0, t1, edge),
@@ -780,10 +779,10 @@ impl Detector {
     /// The edge and combined methods publish crop rows' centre lines, not boundaries
     /// ([`super::centre`]): the edge rows through the vanishing point become the widths of
     /// the Hough rows, or pair into centre lines; the boundaries stay readable in
-    /// [`Self::last_boundaries`]. Without a vanishing point no boundary is published.
+    /// `out.boundaries`. Without a vanishing point no boundary is published.
     fn publish_centre_lines(&mut self, out: &mut Detection) {
-        self.boundaries.clear();
-        self.boundaries
+        out.boundaries.clear();
+        out.boundaries
             .extend(out.rows.iter().filter(|r| r.method == Method::Edge));
         let Some(vp) = out.vanishing_point.map(|v| v.direction) else {
             out.rows.retain(|r| r.method != Method::Edge);
@@ -801,12 +800,6 @@ impl Detector {
             &self.points.rays,
             &self.points.weights,
         );
-    }
-
-    /// The edge method's boundary rows of the last image (edge and combined methods): the
-    /// evidence behind the published centre lines.
-    pub fn last_boundaries(&self) -> &[Row] {
-        &self.boundaries
     }
 
     /// Replaces `out`'s vanishing point by a refitted one and derives heading and tilt

@@ -145,4 +145,8 @@ pub struct Detection {
     pub tilt_rad: Option<f64>,
     /// Quality in 0..=1 (0 when there is no vanishing point).
     pub quality: f64,
+    /// The edge method's boundaries through the vanishing point (edge and combined methods):
+    /// evidence behind the published centre lines, not rows themselves. Row guidance
+    /// measures on them beside the rows.
+    pub boundaries: Vec<Row>,
 }

@@ -174,7 +174,11 @@ impl RowFit {
         let vp = det.vanishing_point?.direction;
         self.measure(
             &vp.into(),
-            det.rows.iter().map(|r| r.normal.into()),
+            // the edge boundaries measure beside the rows, as in the tracker
+            det.rows
+                .iter()
+                .chain(&det.boundaries)
+                .map(|r| r.normal.into()),
             &points.rays,
             &points.weights,
         )
