@@ -501,7 +501,13 @@ fn the_node_pipeline_runs_on_the_camera_and_survives_its_loss() {
         t0.elapsed(),
         counters.snapshot()
     );
-    assert_eq!(shared.source_state(), SourceState::Streaming);
+    // A loaded machine can time a frame or two out right after the reconnection (the
+    // source then reports the loss again and recovers): what must hold is that it streams.
+    wait_for(
+        "the source streaming again",
+        Duration::from_secs(10),
+        || shared.source_state() == SourceState::Streaming,
+    );
     p.request_stop();
     let status = p.join().unwrap();
     println!("pipeline status at the end: {status:?}");
