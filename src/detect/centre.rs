@@ -80,6 +80,41 @@ fn wrap(d: f64) -> f64 {
     (d + 0.5 * PI).rem_euclid(PI) - 0.5 * PI
 }
 
+/// Half the way from `ph` to the nearest of the `others` (angles around the vanishing point),
+/// at most `max`: how far a row's boundaries may lie from it.
+pub(super) fn half_way_limit(ph: f64, max: f64, others: impl Iterator<Item = f64>) -> f64 {
+    let mut limit = max;
+    for p in others {
+        let d = wrap(p - ph).abs();
+        if d > 1e-9 {
+            limit = limit.min(0.5 * d);
+        }
+    }
+    limit
+}
+
+/// Among `candidates` (angle, support, id), the one of largest support (the first of equals)
+/// on each side of `ph` within `limit`: [left, right] as (support, signed angle from `ph`, id).
+/// A long, exact boundary wins over a short stray section nearer the row's centre.
+pub(super) fn strongest_either_side(
+    ph: f64,
+    limit: f64,
+    candidates: impl Iterator<Item = (f64, u32, usize)>,
+) -> [Option<(u32, f64, usize)>; 2] {
+    let mut sides: [Option<(u32, f64, usize)>; 2] = [None, None];
+    for (p, support, id) in candidates {
+        let d = wrap(p - ph);
+        if d.abs() >= limit {
+            continue;
+        }
+        let side = &mut sides[usize::from(d >= 0.0)];
+        if side.map_or(true, |(best, _, _)| support > best) {
+            *side = Some((support, d, id));
+        }
+    }
+    sides
+}
+
 impl CentreLines {
     /// Replaces `rows` (through the vanishing point `vp`) by the crop rows' centre lines:
     /// see the module's text. `max_half_rad` bounds a row's half-width; `rays` and
@@ -120,32 +155,21 @@ impl CentreLines {
                 continue;
             }
             let ph = self.psi[i].0;
-            let mut limit = max_half_rad;
-            for &(p, j) in &self.psi {
-                let d = wrap(p - ph).abs();
-                if rows[j].method != Method::Edge && j != i && d > 1e-9 {
-                    limit = limit.min(0.5 * d);
-                }
-            }
-            // (support, |angle|) of the strongest boundary on each side
-            let mut left: Option<(u32, f64)> = None;
-            let mut right: Option<(u32, f64)> = None;
-            for &(p, j) in &self.psi {
-                if rows[j].method != Method::Edge {
-                    continue;
-                }
-                let d = wrap(p - ph);
-                if d.abs() >= limit {
-                    continue;
-                }
-                let side = if d < 0.0 { &mut left } else { &mut right };
-                if side.map_or(true, |(s, _)| rows[j].support > s) {
-                    *side = Some((rows[j].support, d.abs()));
-                }
-            }
+            let others = self
+                .psi
+                .iter()
+                .filter(|&&(_, j)| rows[j].method != Method::Edge && j != i)
+                .map(|&(p, _)| p);
+            let limit = half_way_limit(ph, max_half_rad, others);
+            let edges = self
+                .psi
+                .iter()
+                .filter(|&&(_, j)| rows[j].method == Method::Edge)
+                .map(|&(p, j)| (p, rows[j].support, j));
+            let [left, right] = strongest_either_side(ph, limit, edges);
             let mut row = *r;
-            if let (Some((_, l)), Some((_, rr))) = (left, right) {
-                row.width_rad = l + rr;
+            if let (Some((_, l, _)), Some((_, rr, _))) = (left, right) {
+                row.width_rad = l.abs() + rr.abs();
                 widened += 1;
             }
             self.out.push(row);

@@ -18,6 +18,7 @@
 //! Rows the vote rejected stay rejected. The same fit serves the edge method alone (one
 //! method: a robust support-weighted fit).
 
+use super::centre::{half_way_limit, strongest_either_side};
 use super::{Method, Row};
 use crate::sphere::Scatter;
 use nalgebra::Vector3;
@@ -303,15 +304,6 @@ pub fn pair_edge_rows(
         let t = n.dot(&b).atan2(n.dot(&a));
         t.rem_euclid(std::f64::consts::PI)
     };
-    let wrap = |d: f64| -> f64 {
-        let pi = std::f64::consts::PI;
-        let d = d.rem_euclid(pi);
-        if d > 0.5 * pi {
-            d - pi
-        } else {
-            d
-        }
-    };
     for (i, r) in rows.iter().enumerate() {
         let kind = match r.method {
             Method::Hough => Kind::Hough,
@@ -333,34 +325,20 @@ pub fn pair_edge_rows(
         if kind != Kind::Hough {
             continue;
         }
-        // Half the way to the nearest other Hough inlier row, at most max_half_rad.
-        let mut limit = max_half_rad;
-        for (p, _, k) in psi.iter() {
-            let d = wrap(p - ph).abs();
-            if *k == Kind::Hough && d > 1e-9 {
-                limit = limit.min(0.5 * d);
-            }
-        }
-        // On each side, the boundary with the largest support (a long, exact boundary
-        // rather than a short stray section nearer the centre).
-        // (support, index into psi) of the best boundary on each side.
-        let mut left: Option<(u32, usize)> = None;
-        let mut right: Option<(u32, usize)> = None;
-        for (j, (p, i, k)) in psi.iter().enumerate() {
-            if *k != Kind::Edge {
-                continue;
-            }
-            let d = wrap(p - ph);
-            if d.abs() >= limit {
-                continue;
-            }
-            let s = rows[*i].support;
-            let side = if d < 0.0 { &mut left } else { &mut right };
-            if side.map_or(true, |(best, _)| s > best) {
-                *side = Some((s, j));
-            }
-        }
-        if let (Some((_, jl)), Some((_, jr))) = (left, right) {
+        // Half the way to the nearest other Hough inlier row, at most max_half_rad; on each
+        // side the strongest boundary not yet paired.
+        let hough = psi
+            .iter()
+            .filter(|&&(_, _, k)| k == Kind::Hough)
+            .map(|&(p, _, _)| p);
+        let limit = half_way_limit(ph, max_half_rad, hough);
+        let edges = psi
+            .iter()
+            .enumerate()
+            .filter(|&(_, &(_, _, k))| k == Kind::Edge)
+            .map(|(j, &(p, i, _))| (p, rows[i].support, j));
+        let [left, right] = strongest_either_side(ph, limit, edges);
+        if let (Some((_, _, jl)), Some((_, _, jr))) = (left, right) {
             let (l, r) = (psi[jl].1, psi[jr].1);
             let (nl, nr) = (rows[l].normal, rows[r].normal);
             let nr = if nl.dot(&nr) < 0.0 { -nr } else { nr };
