@@ -1014,7 +1014,8 @@ impl Detector {
         }
         self.vanish.run(None, out)?;
         if self.opts.pencil.polish {
-            self.polish_pencil_rows(out)?;
+            let band = self.opts.pencil.polish_max_band_deg();
+            self.polish_pencil_rows(out, band)?;
         }
         Ok(())
     }
@@ -1032,7 +1033,8 @@ impl Detector {
         let vp = strips.find(&p.rays, &p.weights, &p.pixel_rad, &mut out.rows)?;
         self.vanish.run(None, out)?;
         if self.opts.strips.polish {
-            self.polish_pencil_rows(out)?;
+            let band = self.opts.strips.polish_max_band_deg();
+            self.polish_pencil_rows(out, band)?;
         }
         // The rows meet in the strips' vanishing point by construction; where the
         // vanishing stage finds none among them (one or two rows), that point is the answer.
@@ -1053,17 +1055,21 @@ impl Detector {
 
     /// Refits the pencil's rows on the image's pixels near each (as the Hough rows are,
     /// [`Preparer::refit`]), each in a wedge towards the vanishing point a quarter of the
-    /// angle to its nearest neighbour wide on each side, then finds the vanishing point
+    /// angle to its nearest neighbour wide on each side (at most `max_band_deg`), then finds the vanishing point
     /// again and refits it by the rows' precision. The pencil places rows on a grid of
     /// profile bins; the refit gives them the sub-pixel precision of the Hough method.
-    fn polish_pencil_rows(&mut self, out: &mut Detection) -> Result<(), DetectError> {
+    fn polish_pencil_rows(
+        &mut self,
+        out: &mut Detection,
+        max_band_deg: f64,
+    ) -> Result<(), DetectError> {
         let Some(vp) = out.vanishing_point.map(|v| v.direction) else {
             return Ok(());
         };
         let a = crate::sphere::any_perpendicular(&vp);
         let b = vp.cross(&a);
         let angle = |n: &Vector3<f64>| n.dot(&b).atan2(n.dot(&a)).rem_euclid(std::f64::consts::PI);
-        let max_band = self.opts.pencil.polish_max_band_deg().to_radians();
+        let max_band = max_band_deg.to_radians();
         self.pencil_bands.clear();
         for (i, r) in out.rows.iter().enumerate() {
             let pi = angle(&r.normal);

@@ -203,6 +203,9 @@ pub fn resolve(
     o.pencil
         .polish_max_band_deg
         .get_or_insert(angle(super::pencil::REFERENCE_POLISH_MAX_BAND_DEG));
+    o.strips
+        .polish_max_band_deg
+        .get_or_insert(angle(super::strips::REFERENCE_POLISH_MAX_BAND_DEG));
     o.edge
         .merge
         .max_angle_rad
@@ -291,6 +294,10 @@ pub fn scales_report(cal: &Calibration, opts: &DetectorOptions) -> Result<String
         ("vanishing.min_spread_deg", v.min_spread_deg()),
         ("combined.pair_max_deg", opts.combined.pair_max_deg()),
         ("pencil.polish_max_band_deg", pe.polish_max_band_deg()),
+        (
+            "strips.polish_max_band_deg",
+            opts.strips.polish_max_band_deg(),
+        ),
         (
             "edge.merge.max_angle_rad",
             opts.edge.merge.max_angle_rad().to_degrees(),

@@ -68,6 +68,15 @@ pub struct StripsOptions {
     /// Refit the rows on the image's pixels near each, and the vanishing point on them (as
     /// the pencil's polish).
     pub polish: bool,
+    /// The polish's widest band around a row (degrees; a quarter of the angle to its nearest
+    /// neighbour otherwise). Derived from the calibration when absent: the reference value
+    /// times `angle_scale` (docs/detector.md).
+    pub polish_max_band_deg: Option<f64>,
+    /// A row is placed at the weighted mean u of the peaks within `comb_band` of it,
+    /// re-centred this many times starting from its tooth (0: on the comb's tooth). Real
+    /// rows are not evenly spaced (tramlines, drilling units, a wandering drill), and the
+    /// polish moves a row only within its band.
+    pub recentre_rounds: usize,
 }
 
 impl Default for StripsOptions {
@@ -89,11 +98,24 @@ impl Default for StripsOptions {
             comb_band: 0.25,
             max_rows: 16,
             polish: true,
+            polish_max_band_deg: None,
+            recentre_rounds: 2,
         }
     }
 }
 
+/// The strips polish's widest band (degrees) at the reference angular resolution: wider
+/// than the pencil's, since the strips' rows lie on their own peaks and only need room to
+/// reach the row's centre (measured on CRDLD: docs/real.md).
+pub const REFERENCE_POLISH_MAX_BAND_DEG: f64 = 16.0;
+
 impl StripsOptions {
+    /// The polish's widest band (degrees) in force (the option, else the reference value).
+    pub fn polish_max_band_deg(&self) -> f64 {
+        self.polish_max_band_deg
+            .unwrap_or(REFERENCE_POLISH_MAX_BAND_DEG)
+    }
+
     pub fn validate(&self) -> Result<(), DetectError> {
         let bad = |what: &str| Err(DetectError::Options(format!("strips.{what}")));
         let pos = |v: f64| v.is_finite() && v > 0.0;
@@ -176,6 +198,16 @@ impl StripsOptions {
             return bad(&format!(
                 "comb_band = {} must be within (0, 0.5]",
                 self.comb_band
+            ));
+        }
+        let b = self.polish_max_band_deg();
+        if !(b.is_finite() && b > 0.0 && b <= 45.0) {
+            return bad(&format!("polish_max_band_deg = {b} must be within (0, 45]"));
+        }
+        if self.recentre_rounds > 16 {
+            return bad(&format!(
+                "recentre_rounds = {} must be within 0..=16",
+                self.recentre_rounds
             ));
         }
         if !(1..=256).contains(&self.max_rows) {
@@ -733,7 +765,17 @@ impl StripsRows {
             let on = &self.seen[lo..hi];
             if distinct_strips(on) >= o.min_strips {
                 let w: f64 = on.iter().map(|x| x.w).sum();
-                self.teeth.push([m, w, on.len() as f64]);
+                let mut at = m;
+                for _ in 0..o.recentre_rounds {
+                    let lo = self.seen.partition_point(|x| x.u < at - band);
+                    let hi = self.seen.partition_point(|x| x.u <= at + band);
+                    let on = &self.seen[lo..hi];
+                    let sw: f64 = on.iter().map(|x| x.w).sum();
+                    if sw > 0.0 {
+                        at = on.iter().map(|x| x.w * x.u).sum::<f64>() / sw;
+                    }
+                }
+                self.teeth.push([at, w, on.len() as f64]);
             }
         }
         // the best-supported teeth, at most max_rows, reported in order across the image
@@ -801,6 +843,12 @@ mod tests {
     }
 
     fn field(f: f64, size: f64, m: &Mounting, spacing: f64, offset: f64, heading: f64) -> Field {
+        let ys: Vec<f64> = (-8..=8).map(|k| offset + k as f64 * spacing).collect();
+        field_at(f, size, m, &ys, heading)
+    }
+
+    /// As [`field`], the rows at lateral positions `ys` (metres).
+    fn field_at(f: f64, size: f64, m: &Mounting, ys: &[f64], heading: f64) -> Field {
         let cam_from_robot = m.robot_from_camera().inverse();
         let yaw = Rotation3::from_axis_angle(&Vector3::z_axis(), heading);
         let h = m.height_m;
@@ -812,8 +860,7 @@ mod tests {
                 .wrapping_add(1442695040888963407);
             (seed >> 11) as f64 / (1u64 << 53) as f64
         };
-        for k in -8..=8 {
-            let y = offset + k as f64 * spacing;
+        for &y in ys {
             let a = cam_from_robot * (yaw * Vector3::new(2.0, y, -h));
             let b = cam_from_robot * (yaw * Vector3::new(12.0, y, -h));
             normals.push(a.cross(&b).normalize());
@@ -889,6 +936,43 @@ mod tests {
                 assert!(a.normal.dot(&b.normal).abs() < 0.9999, "duplicate rows");
             }
         }
+    }
+
+    #[test]
+    fn rows_spaced_unevenly_lie_on_their_own_peaks_not_on_the_comb() {
+        // 0.5 m rows, each shifted by up to 0.09 m (under the comb's band of a quarter
+        // period): the comb's evenly spaced teeth miss them, their own peaks do not
+        let m = forward_camera();
+        let shift = [0.0, 0.09, -0.07, 0.05, -0.09, 0.08, -0.04, 0.07, -0.08];
+        let ys: Vec<f64> = (-4..=4)
+            .zip(shift)
+            .map(|(k, d)| 0.1 + k as f64 * 0.5 + d)
+            .collect();
+        let fld = field_at(300.0, 512.0, &m, &ys, 3f64.to_radians());
+        let worst = |rounds: usize| {
+            let opts = StripsOptions {
+                recentre_rounds: rounds,
+                ..StripsOptions::default()
+            };
+            let mut s = StripsRows::new(opts, 15.0, &m).unwrap();
+            let mut rows = Vec::new();
+            s.find(&fld.rays, &fld.weights, &fld.pixel_rad, &mut rows)
+                .unwrap()
+                .expect("a vanishing point");
+            assert!(rows.len() >= 4, "{} rows", rows.len());
+            rows.iter()
+                .map(|r| nearest(&r.normal, &fld.normals))
+                .fold(0.0f64, f64::max)
+        };
+        let (on_peaks, on_teeth) = (worst(StripsOptions::default().recentre_rounds), worst(0));
+        assert!(
+            on_peaks < 4.0 / 300.0,
+            "a row {on_peaks} rad from every true row"
+        );
+        assert!(
+            on_teeth > 2.0 * on_peaks,
+            "the comb's teeth alone were as close ({on_teeth} rad): the test shows nothing"
+        );
     }
 
     #[test]
