@@ -77,6 +77,11 @@ pub struct StripsOptions {
     /// rows are not evenly spaced (tramlines, drilling units, a wandering drill), and the
     /// polish moves a row only within its band.
     pub recentre_rounds: usize,
+    /// A peak's height is its prominence within this many pixels on either side (how far it
+    /// stands above the higher of the lowest points left and right of it) instead of its
+    /// height above the strip's median (0). Rows inside dense canopy stand above their
+    /// valleys but not above a median that the canopy raised.
+    pub prominence_px: f64,
 }
 
 impl Default for StripsOptions {
@@ -100,6 +105,7 @@ impl Default for StripsOptions {
             polish: true,
             polish_max_band_deg: None,
             recentre_rounds: 2,
+            prominence_px: 12.0,
         }
     }
 }
@@ -203,6 +209,12 @@ impl StripsOptions {
         let b = self.polish_max_band_deg();
         if !(b.is_finite() && b > 0.0 && b <= 45.0) {
             return bad(&format!("polish_max_band_deg = {b} must be within (0, 45]"));
+        }
+        if !(self.prominence_px.is_finite() && (0.0..=1000.0).contains(&self.prominence_px)) {
+            return bad(&format!(
+                "prominence_px = {} must be within 0..=1000",
+                self.prominence_px
+            ));
         }
         if self.recentre_rounds > 16 {
             return bad(&format!(
@@ -523,15 +535,32 @@ impl StripsRows {
         self.scratch.extend_from_slice(&self.smooth);
         let mid = self.scratch.len() / 2;
         let median = *self.scratch.select_nth_unstable_by(mid, f64::total_cmp).1;
-        let top = self.smooth.iter().fold(0.0f64, |m, &x| m.max(x - median));
+        let win = self.opts.prominence_px.round() as usize;
+        let sm = &self.smooth;
+        let is_max = |i: usize| sm[i] > sm[i - 1] && sm[i] >= sm[i + 1];
+        let height = |i: usize| {
+            if win == 0 {
+                sm[i] - median
+            } else {
+                prominence(sm, i, win)
+            }
+        };
+        let top = if win == 0 {
+            sm.iter().fold(0.0f64, |m, &x| m.max(x - median))
+        } else {
+            (1..bins.saturating_sub(1))
+                .filter(|&i| is_max(i))
+                .map(height)
+                .fold(0.0f64, f64::max)
+        };
         if top <= 0.0 {
             return;
         }
         let floor = self.opts.peak_fraction * top;
         for i in 1..bins.saturating_sub(1) {
-            let (l, c, r) = (self.smooth[i - 1], self.smooth[i], self.smooth[i + 1]);
-            let h = c - median;
-            if c > l && c >= r && h > 0.0 && h >= floor {
+            let (l, c, r) = (sm[i - 1], sm[i], sm[i + 1]);
+            let h = if is_max(i) { height(i) } else { 0.0 };
+            if h > 0.0 && h >= floor {
                 // the parabola through the three bins for the peak's sub-pixel position
                 let den = l - 2.0 * c + r;
                 let off = if den < 0.0 {
@@ -805,6 +834,20 @@ pub fn looks_forward(m: &Mounting) -> bool {
     -RobotAxes::new(m).fwd.z >= 0.2
 }
 
+/// How far `sm[i]` stands above the higher of the lowest values within `win` bins on its
+/// left and on its right (the profile's ends bound a side with fewer bins).
+fn prominence(sm: &[f64], i: usize, win: usize) -> f64 {
+    let low = |xs: &[f64]| xs.iter().fold(f64::INFINITY, |m, &x| m.min(x));
+    let left = low(&sm[i.saturating_sub(win)..i]);
+    let right = low(&sm[(i + 1).min(sm.len())..(i + 1 + win).min(sm.len())]);
+    let base = left.max(right);
+    if base.is_finite() {
+        sm[i] - base
+    } else {
+        0.0
+    }
+}
+
 /// How many different strips the peaks (sorted by u) come from.
 fn distinct_strips(on: &[Seen]) -> usize {
     let mut n = 0;
@@ -972,6 +1015,65 @@ mod tests {
         assert!(
             on_teeth > 2.0 * on_peaks,
             "the comb's teeth alone were as close ({on_teeth} rad): the test shows nothing"
+        );
+    }
+
+    #[test]
+    fn rows_beside_dense_canopy_stand_out_by_their_prominence() {
+        // 0.5 m rows; on the left of y = -0.3 m (REP 103: y to the left) a carpet of
+        // vegetation between them, denser than the rows' own plants a little way out: it
+        // raises every strip's median above the bare right side's rows
+        let m = forward_camera();
+        let ys: Vec<f64> = (-4..=4).map(|k| 0.1 + k as f64 * 0.5).collect();
+        let mut fld = field_at(300.0, 512.0, &m, &ys, 0.0);
+        let cam_from_robot = m.robot_from_camera().inverse();
+        let mut seed = 777u64;
+        let mut rnd = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for _ in 0..200_000 {
+            let x = 1.0 / (1.0 - rnd() * (1.0 - 1.0 / 40.0));
+            let y = -0.3 + rnd() * 6.0;
+            let r = (cam_from_robot * Vector3::new(x, y, -m.height_m)).normalize();
+            let (row, col) = (r.x / -r.z * 300.0, r.y / -r.z * 300.0);
+            if -r.z > 0.05 && row.abs() <= 256.0 && col.abs() <= 256.0 {
+                fld.rays.push([r.x as f32, r.y as f32, r.z as f32]);
+                fld.weights.push(1.0);
+                fld.pixel_rad.push(((-r.z).powf(1.5) / 300.0) as f32);
+            }
+        }
+        // the true rows right of the carpet that each option finds (within 4 px-angles)
+        let bare: Vec<Vector3<f64>> = ys
+            .iter()
+            .zip(&fld.normals)
+            .filter(|(y, _)| **y < -0.3)
+            .map(|(_, n)| *n)
+            .collect();
+        let found = |prominence_px: f64| {
+            let opts = StripsOptions {
+                prominence_px,
+                ..StripsOptions::default()
+            };
+            let mut s = StripsRows::new(opts, 15.0, &m).unwrap();
+            let mut rows = Vec::new();
+            s.find(&fld.rays, &fld.weights, &fld.pixel_rad, &mut rows)
+                .unwrap();
+            bare.iter()
+                .filter(|t| {
+                    rows.iter()
+                        .any(|r| nearest(&r.normal, &[**t]) < 4.0 / 300.0)
+                })
+                .count()
+        };
+        let (by_prominence, by_median) =
+            (found(StripsOptions::default().prominence_px), found(0.0));
+        assert_eq!(by_prominence, bare.len(), "rows beside the canopy found");
+        assert!(
+            by_median < by_prominence,
+            "the median found {by_median}: the test shows nothing"
         );
     }
 
