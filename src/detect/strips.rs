@@ -895,40 +895,52 @@ mod tests {
         let cam_from_robot = m.robot_from_camera().inverse();
         let yaw = Rotation3::from_axis_angle(&Vector3::z_axis(), heading);
         let h = m.height_m;
-        let (mut rays, mut weights, mut pixel_rad, mut normals) = (vec![], vec![], vec![], vec![]);
-        let mut seed = 12345u64;
-        let mut rnd = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (seed >> 11) as f64 / (1u64 << 53) as f64
+        let mut fld = Field {
+            rays: vec![],
+            weights: vec![],
+            pixel_rad: vec![],
+            normals: vec![],
         };
+        let mut rnd = uniform(12345);
         for &y in ys {
             let a = cam_from_robot * (yaw * Vector3::new(2.0, y, -h));
             let b = cam_from_robot * (yaw * Vector3::new(12.0, y, -h));
-            normals.push(a.cross(&b).normalize());
+            fld.normals.push(a.cross(&b).normalize());
             for _ in 0..3000 {
                 // forward distances spread like the image's rows (denser far away)
                 let x = 1.0 / (1.0 - rnd() * (1.0 - 1.0 / 40.0));
                 let p = cam_from_robot * (yaw * Vector3::new(x, y + (rnd() - 0.5) * 0.08, -h));
-                let r = p.normalize();
-                if -r.z <= 0.05 {
-                    continue;
-                }
-                let (row, col) = (r.x / -r.z * f, r.y / -r.z * f);
-                if row.abs() > size / 2.0 || col.abs() > size / 2.0 {
-                    continue;
-                }
-                rays.push([r.x as f32, r.y as f32, r.z as f32]);
-                weights.push(1.0);
-                pixel_rad.push(((-r.z).powf(1.5) / f) as f32);
+                fld.see(&p, f, size);
             }
         }
-        Field {
-            rays,
-            weights,
-            pixel_rad,
-            normals,
+        fld
+    }
+
+    impl Field {
+        /// Adds the point `p` (camera frame) when a pinhole of focal length `f` on a
+        /// `size`² image sees it.
+        fn see(&mut self, p: &Vector3<f64>, f: f64, size: f64) {
+            let r = p.normalize();
+            if -r.z <= 0.05 {
+                return;
+            }
+            let (row, col) = (r.x / -r.z * f, r.y / -r.z * f);
+            if row.abs() > size / 2.0 || col.abs() > size / 2.0 {
+                return;
+            }
+            self.rays.push([r.x as f32, r.y as f32, r.z as f32]);
+            self.weights.push(1.0);
+            self.pixel_rad.push(((-r.z).powf(1.5) / f) as f32);
+        }
+    }
+
+    /// A deterministic uniform generator on [0, 1) from `seed`.
+    fn uniform(mut seed: u64) -> impl FnMut() -> f64 {
+        move || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
         }
     }
 
@@ -1027,23 +1039,15 @@ mod tests {
         let ys: Vec<f64> = (-4..=4).map(|k| 0.1 + k as f64 * 0.5).collect();
         let mut fld = field_at(300.0, 512.0, &m, &ys, 0.0);
         let cam_from_robot = m.robot_from_camera().inverse();
-        let mut seed = 777u64;
-        let mut rnd = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rnd = uniform(777);
         for _ in 0..200_000 {
             let x = 1.0 / (1.0 - rnd() * (1.0 - 1.0 / 40.0));
             let y = -0.3 + rnd() * 6.0;
-            let r = (cam_from_robot * Vector3::new(x, y, -m.height_m)).normalize();
-            let (row, col) = (r.x / -r.z * 300.0, r.y / -r.z * 300.0);
-            if -r.z > 0.05 && row.abs() <= 256.0 && col.abs() <= 256.0 {
-                fld.rays.push([r.x as f32, r.y as f32, r.z as f32]);
-                fld.weights.push(1.0);
-                fld.pixel_rad.push(((-r.z).powf(1.5) / 300.0) as f32);
-            }
+            fld.see(
+                &(cam_from_robot * Vector3::new(x, y, -m.height_m)),
+                300.0,
+                512.0,
+            );
         }
         // the true rows right of the carpet that each option finds (within 4 px-angles)
         let bare: Vec<Vector3<f64>> = ys
