@@ -1055,8 +1055,8 @@ impl Detector {
 
     /// Refits the pencil's rows on the image's pixels near each (as the Hough rows are,
     /// [`Preparer::refit`]), each in a wedge towards the vanishing point a quarter of the
-    /// angle to its nearest neighbour wide on each side (at most `max_band_deg`), then finds the vanishing point
-    /// again and refits it by the rows' precision. The pencil places rows on a grid of
+    /// angle to its nearest neighbour wide on each side (at most `max_band_deg`), then finds
+    /// the vanishing point again and refits it by the rows' precision. The pencil places rows on a grid of
     /// profile bins; the refit gives them the sub-pixel precision of the Hough method.
     fn polish_pencil_rows(
         &mut self,

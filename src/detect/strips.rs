@@ -789,16 +789,12 @@ impl StripsRows {
         for k in k0..=k1 {
             let m = phase + k as f64 * period;
             let band = o.comb_band * period;
-            let lo = self.seen.partition_point(|x| x.u < m - band);
-            let hi = self.seen.partition_point(|x| x.u <= m + band);
-            let on = &self.seen[lo..hi];
+            let on = within(&self.seen, m, band);
             if distinct_strips(on) >= o.min_strips {
                 let w: f64 = on.iter().map(|x| x.w).sum();
                 let mut at = m;
                 for _ in 0..o.recentre_rounds {
-                    let lo = self.seen.partition_point(|x| x.u < at - band);
-                    let hi = self.seen.partition_point(|x| x.u <= at + band);
-                    let on = &self.seen[lo..hi];
+                    let on = within(&self.seen, at, band);
                     let sw: f64 = on.iter().map(|x| x.w).sum();
                     if sw > 0.0 {
                         at = on.iter().map(|x| x.w * x.u).sum::<f64>() / sw;
@@ -832,6 +828,13 @@ impl StripsRows {
 /// robot's forward axis within about 78° of the optical axis (the camera looks along −z).
 pub fn looks_forward(m: &Mounting) -> bool {
     -RobotAxes::new(m).fwd.z >= 0.2
+}
+
+/// The peaks (sorted by u) within `band` of `u`.
+fn within(seen: &[Seen], u: f64, band: f64) -> &[Seen] {
+    let lo = seen.partition_point(|x| x.u < u - band);
+    let hi = seen.partition_point(|x| x.u <= u + band);
+    &seen[lo..hi]
 }
 
 /// How far `sm[i]` stands above the higher of the lowest values within `win` bins on its
