@@ -73,7 +73,7 @@ fn compare(method: Method, fine_angle_scale: Option<f64>, seed: u64) -> Comparis
         angle_scale: fine_angle_scale,
         ..base.clone()
     };
-    fine_opts.threshold.target_points *= 16;
+    fine_opts.threshold.target_points = Some(fine_opts.threshold.target_points() * 16);
     let a = detect(&fine, &scene, &fine_opts);
     let b = detect(&coarse, &scene, &base);
     let tol = 3.0 * COARSE_PIXEL_RAD;

@@ -295,19 +295,20 @@ fn crdld_default_method_holds_on_every_tenth_image() {
         let o = outcomes(&out);
         assert!(o.iter().all(|v| v["error"].is_null()));
         let (recall, precision, score) = pooled(&o);
-        // measured 0.549 / 0.709 / 0.444 at f = 300 px (peaks above the strip's median:
+        // measured 0.652 / 0.674 / 0.493 at f = 300 px (keeping 15000 points instead of
+        // 23 % of the pixels: 0.549 / 0.709 / 0.444; peaks above the strip's median:
         // 0.520 / 0.655 / 0.418; rows on the comb's teeth and the pencil's polish band:
         // 0.455 / 0.575 / 0.376; the strips' first defaults: 0.410 /
         // 0.585 / 0.362; the pencil, the default before: 0.328 / 0.426 / 0.296; the combined
         // method 0.307 / 0.241 / 0.213)
         if f == "300" {
             assert!(
-                recall >= 0.51 && precision >= 0.66 && score >= 0.41,
+                recall >= 0.62 && precision >= 0.64 && score >= 0.47,
                 "{stdout}"
             );
         }
         scores.push(score);
     }
-    // two focal-length guesses 3x apart give nearly the same score (measured 0.444, 0.444)
+    // two focal-length guesses 3x apart give nearly the same score (measured 0.493, 0.474)
     assert!((scores[0] - scores[1]).abs() <= 0.05, "{scores:?}");
 }

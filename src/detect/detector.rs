@@ -267,7 +267,7 @@ impl Preparer {
             work_cal.model.height as usize,
         );
         self.tmp.resize(n, 0);
-        self.kept.reserve(self.opts.threshold.target_points + 1);
+        self.kept.reserve(self.opts.threshold.target_points() + 1);
         self.candidates = Vec::with_capacity(mask_result.valid);
         tracing::debug!(
             width = view.width,
@@ -553,9 +553,9 @@ impl Detector {
             pencil: PencilRows::new(opts.pencil, opts.max_tilt_deg, &cal.mounting)?,
             vanish: VanishingStage::new(cal, &opts)?,
             points: Points {
-                rays: Vec::with_capacity(opts.threshold.target_points + 1),
-                weights: Vec::with_capacity(opts.threshold.target_points + 1),
-                pixel_rad: Vec::with_capacity(opts.threshold.target_points + 1),
+                rays: Vec::with_capacity(opts.threshold.target_points() + 1),
+                weights: Vec::with_capacity(opts.threshold.target_points() + 1),
+                pixel_rad: Vec::with_capacity(opts.threshold.target_points() + 1),
             },
             opts,
             edge: None,

@@ -183,6 +183,10 @@ pub fn resolve(
     if o.method == Method::Auto {
         o.method = auto_method(&resolution, &cal.mounting);
     }
+    if o.method == Method::Strips && o.threshold.target_points.is_none() {
+        let pixels = resolution.width as f64 * resolution.height as f64;
+        o.threshold.target_points = Some(((o.strips.kept_share * pixels).round() as usize).max(1));
+    }
     let h = &mut o.hough;
     h.phi_bins.get_or_insert(bins(REFERENCE_BINS));
     h.theta_bins.get_or_insert(bins(REFERENCE_BINS));
@@ -407,6 +411,37 @@ mod tests {
         assert_eq!(o3.hough.phi_bins, Some((90.0 / s3.factor).round() as usize));
         assert_eq!(o9.vanishing.inlier_deg, Some(s9.factor));
         assert_eq!(o9.edge.merge.max_angle_rad, Some(0.005 * s9.factor));
+    }
+
+    #[test]
+    fn the_strips_keep_a_share_of_the_image_and_other_methods_a_fixed_count() {
+        let text = "[pinhole]\nwidth = 640\nheight = 480\nfx = 300.0\nfy = 300.0\n\
+                    cx = 319.5\ncy = 239.5\n[mounting]\npitch_deg = -47.0\n";
+        let cal = Calibration::parse_toml(text, std::path::Path::new("p.toml")).unwrap();
+        let (o, _) = resolve(&cal, &DetectorOptions::default()).unwrap();
+        assert_eq!(o.method, Method::Strips);
+        let share = o.strips.kept_share;
+        assert_eq!(
+            o.threshold.target_points,
+            Some((share * 640.0 * 480.0).round() as usize)
+        );
+        // an explicit target, or another method, keeps its own
+        let explicit: DetectorOptions =
+            toml::from_str("[threshold]\ntarget_points = 5000\n").unwrap();
+        assert_eq!(
+            resolve(&cal, &explicit).unwrap().0.threshold.target_points,
+            Some(5000)
+        );
+        let hough = DetectorOptions {
+            method: Method::Hough,
+            ..Default::default()
+        };
+        let (o, _) = resolve(&cal, &hough).unwrap();
+        assert_eq!(o.threshold.target_points, None);
+        assert_eq!(
+            o.threshold.target_points(),
+            super::super::threshold::DEFAULT_TARGET_POINTS
+        );
     }
 
     #[test]

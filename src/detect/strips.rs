@@ -33,6 +33,10 @@ use serde::{Deserialize, Serialize};
 pub struct StripsOptions {
     /// Height of one strip along the image's vertical (across the horizon).
     pub strip_px: f64,
+    /// The share of the working image's pixels kept as points (the threshold's target when
+    /// `threshold.target_points` is absent): the strips' profiles need the rows' whole
+    /// vegetation, pale plants included, not only its brightest few per cent.
+    pub kept_share: f64,
     /// Gaussian smoothing (sigma) of a strip's profile before its peaks are read: about a
     /// plant's half-width.
     pub smooth_px: f64,
@@ -88,6 +92,7 @@ impl Default for StripsOptions {
     fn default() -> Self {
         StripsOptions {
             strip_px: 11.0,
+            kept_share: 0.23,
             smooth_px: 2.5,
             peak_fraction: 0.15,
             peak_sigma_px: 4.5,
@@ -129,6 +134,12 @@ impl StripsOptions {
             return bad(&format!(
                 "strip_px = {} must be within (0, 1000]",
                 self.strip_px
+            ));
+        }
+        if !(self.kept_share.is_finite() && self.kept_share > 0.0 && self.kept_share <= 1.0) {
+            return bad(&format!(
+                "kept_share = {} must be within (0, 1]",
+                self.kept_share
             ));
         }
         if !(pos(self.smooth_px) && self.smooth_px <= 100.0) {
@@ -1174,6 +1185,13 @@ mod tests {
                     ..StripsOptions::default()
                 },
                 "min_strips",
+            ),
+            (
+                StripsOptions {
+                    kept_share: 0.0,
+                    ..StripsOptions::default()
+                },
+                "kept_share",
             ),
         ] {
             let e = o.validate().unwrap_err().to_string();

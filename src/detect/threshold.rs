@@ -14,8 +14,10 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ThresholdOptions {
-    /// About how many points to keep.
-    pub target_points: usize,
+    /// About how many points to keep. When absent: [`DEFAULT_TARGET_POINTS`], or, for the
+    /// strips method, `strips.kept_share` of the working image's pixels (resolved with the
+    /// calibration, `omnirow config detector` shows the value in force).
+    pub target_points: Option<usize>,
     /// Pixels at or below this value are never kept (background).
     pub min_level: u8,
 }
@@ -23,9 +25,19 @@ pub struct ThresholdOptions {
 impl Default for ThresholdOptions {
     fn default() -> Self {
         ThresholdOptions {
-            target_points: 15_000,
+            target_points: None,
             min_level: 10,
         }
+    }
+}
+
+/// The points kept when `target_points` is absent (and the method is not the strips).
+pub const DEFAULT_TARGET_POINTS: usize = 15_000;
+
+impl ThresholdOptions {
+    /// The target in force.
+    pub fn target_points(&self) -> usize {
+        self.target_points.unwrap_or(DEFAULT_TARGET_POINTS)
     }
 }
 
@@ -59,7 +71,7 @@ pub fn keep_brightest(
             mask.len()
         )));
     }
-    if opts.target_points == 0 {
+    if opts.target_points() == 0 {
         return Err(DetectError::Options(
             "threshold.target_points must be at least 1".into(),
         ));
@@ -106,7 +118,7 @@ pub fn keep_brightest(
         }
         m
     };
-    let n = opts.target_points as u64;
+    let n = opts.target_points() as u64;
     let mut above: u64 = 0; // pixels with value > level
     let mut level = 255usize;
     let lo = opts.min_level as usize + 1;
@@ -175,7 +187,7 @@ mod tests {
         mask[255] = 0;
         let mut out = Vec::new();
         let opts = ThresholdOptions {
-            target_points: 10,
+            target_points: Some(10),
             min_level: 10,
         };
         let r = keep_brightest(&image, &mask, &opts, &mut out).unwrap();
@@ -191,7 +203,7 @@ mod tests {
         let mask = vec![0xFFu8; 1000];
         let mut out = Vec::new();
         let opts = ThresholdOptions {
-            target_points: 100,
+            target_points: Some(100),
             min_level: 10,
         };
         let r = keep_brightest(&image, &mask, &opts, &mut out).unwrap();
@@ -221,7 +233,7 @@ mod tests {
             let image: Vec<u8> = (0..4000).map(|_| { s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407); (s >> 56) as u8 }).collect();
             let mask = vec![0xFFu8; image.len()];
             let mut out = Vec::new();
-            let opts = ThresholdOptions { target_points: n, min_level: 10 };
+            let opts = ThresholdOptions { target_points: Some(n), min_level: 10 };
             let r = keep_brightest(&image, &mask, &opts, &mut out).unwrap();
             let cand = image.iter().filter(|&&v| v > 10).count();
             prop_assert_eq!(r.candidates, cand);
