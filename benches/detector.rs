@@ -260,9 +260,9 @@ fn small_frame() -> (omnirow::camera::Calibration, Vec<u8>) {
     (cal, data)
 }
 
-/// The default detector (`auto`: the seeded pencil for this perspective lens), the combined
+/// The default detector (`auto`: the strips method for this perspective lens), the combined
 /// and the Hough method on a 640×480 RGB frame, each with and without the prior (the pencil
-/// ignores it); prints each one's thread CPU time per frame.
+/// and the strips ignore it); prints each one's thread CPU time per frame.
 fn bench_small(c: &mut Criterion) {
     let (cal, data) = small_frame();
     let view = ImageView::new(640, 480, PixelFormat::Rgb8, &data).unwrap();
