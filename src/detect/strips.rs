@@ -727,21 +727,22 @@ impl StripsRows {
         for i in 0..self.seen.len() {
             let x = self.seen[i];
             total += x.w;
-            let reach = 3.0 * (x.s * x.s + s_max * s_max).sqrt();
+            let xs2 = x.s * x.s;
+            let reach = 3.0 * (xs2 + s_max * s_max).sqrt();
+            let mut acc = 0.0;
             for y in &self.seen[i + 1..] {
                 let du = y.u - x.u;
                 if du > reach {
                     break;
                 }
-                if y.strip == x.strip {
-                    continue;
-                }
-                let t2 = du * du / (9.0 * (x.s * x.s + y.s * y.s));
-                if t2 < 1.0 {
-                    let k = 1.0 - t2;
-                    num += x.w * y.w * k * k * k;
+                // the division only for the pairs within the kernel's support
+                let (du2, var9) = (du * du, 9.0 * (xs2 + y.s * y.s));
+                if du2 < var9 && y.strip != x.strip {
+                    let k = 1.0 - du2 / var9;
+                    acc += y.w * k * k * k;
                 }
             }
+            num += x.w * acc;
         }
         if total <= 0.0 {
             return 0.0;
