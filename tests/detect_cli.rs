@@ -320,6 +320,19 @@ fn pal_lens_mask_radius_override_and_methods() {
         err.contains("tuned.toml:2") && err.contains("max_rowz"),
         "{err}"
     );
+    // a hostile point budget is refused by name, not an allocation that aborts
+    std::fs::write(
+        &conf,
+        "[detector.threshold]\ntarget_points = 1000000000000\n",
+    )
+    .unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_omnirow"))
+        .args(args(None))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("threshold.target_points"), "{err}");
 }
 
 #[test]

@@ -107,6 +107,7 @@ impl Preparer {
     pub fn new(cal: &Calibration, opts: &DetectorOptions) -> Result<Self, DetectError> {
         opts.mask.validate()?;
         opts.refit.validate()?;
+        opts.threshold.validate()?;
         if !(opts.max_tilt_deg > 0.0 && opts.max_tilt_deg <= 80.0) {
             return Err(DetectError::Options(format!(
                 "max_tilt_deg = {} must be within (0, 80]",

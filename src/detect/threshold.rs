@@ -34,10 +34,24 @@ impl Default for ThresholdOptions {
 /// The points kept when `target_points` is absent (and the method is not the strips).
 pub const DEFAULT_TARGET_POINTS: usize = 15_000;
 
+/// The most points a configuration may ask for (more than a 5-megapixel sensor has: a
+/// hostile value cannot make the buffers sized for it exhaust the memory).
+pub const MAX_TARGET_POINTS: usize = 50_000_000;
+
 impl ThresholdOptions {
     /// The target in force.
     pub fn target_points(&self) -> usize {
         self.target_points.unwrap_or(DEFAULT_TARGET_POINTS)
+    }
+
+    pub fn validate(&self) -> Result<(), DetectError> {
+        let n = self.target_points();
+        if !(1..=MAX_TARGET_POINTS).contains(&n) {
+            return Err(DetectError::Options(format!(
+                "threshold.target_points = {n} must be within 1..={MAX_TARGET_POINTS}"
+            )));
+        }
+        Ok(())
     }
 }
 
@@ -71,11 +85,7 @@ pub fn keep_brightest(
             mask.len()
         )));
     }
-    if opts.target_points() == 0 {
-        return Err(DetectError::Options(
-            "threshold.target_points must be at least 1".into(),
-        ));
-    }
+    opts.validate()?;
     if image.len() > u32::MAX as usize {
         return Err(DetectError::Buffer("threshold: image too large".into()));
     }
@@ -179,6 +189,21 @@ pub fn keep_brightest(
 mod tests {
     use super::*;
     use proptest::prelude::*;
+
+    #[test]
+    fn a_target_of_none_or_too_many_points_is_named() {
+        let (image, mask) = (vec![50u8; 16], vec![0xFFu8; 16]);
+        for n in [0, MAX_TARGET_POINTS + 1] {
+            let opts = ThresholdOptions {
+                target_points: Some(n),
+                min_level: 10,
+            };
+            let e = keep_brightest(&image, &mask, &opts, &mut Vec::new())
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("threshold.target_points"), "{e}");
+        }
+    }
 
     #[test]
     fn keeps_the_brightest_and_respects_mask() {
