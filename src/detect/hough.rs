@@ -116,6 +116,12 @@ impl HoughOptions {
                 self.max_rows
             ));
         }
+        if self.nms_radius > 64 {
+            return bad(format!(
+                "hough.nms_radius = {} must be within 0..=64",
+                self.nms_radius
+            ));
+        }
         if !(0.0..=1.0).contains(&self.min_peak_fraction) {
             return bad(format!(
                 "hough.min_peak_fraction = {} must be within 0..=1",
@@ -1015,5 +1021,12 @@ pub(crate) mod tests {
             ..Default::default()
         })
         .is_err());
+        // a hostile suppression radius is refused by name, not a neighbourhood of 10^18 cells
+        let e = HoughRows::new(HoughOptions {
+            nms_radius: 1_000_000_000,
+            ..Default::default()
+        })
+        .unwrap_err();
+        assert!(e.to_string().contains("hough.nms_radius"), "{e}");
     }
 }

@@ -167,6 +167,12 @@ impl PencilOptions {
                 )));
             }
         }
+        if self.refine_iterations > 64 {
+            return Err(DetectError::Options(format!(
+                "pencil.refine_iterations = {} must be within 0..=64",
+                self.refine_iterations
+            )));
+        }
         if self.reference_px < 2.0 * self.bin_px {
             return Err(DetectError::Options(format!(
                 "pencil.reference_px = {} must be at least twice pencil.bin_px = {}",
@@ -1055,6 +1061,12 @@ mod tests {
             ..PencilOptions::default()
         };
         assert!(PencilRows::new(o, 15.0, &Mounting::default()).is_err());
+        let o = PencilOptions {
+            refine_iterations: 1_000_000_000,
+            ..PencilOptions::default()
+        };
+        let e = PencilRows::new(o, 15.0, &Mounting::default()).unwrap_err();
+        assert!(e.to_string().contains("pencil.refine_iterations"), "{e}");
     }
 
     #[test]

@@ -98,6 +98,12 @@ impl RefitOptions {
                 self.background_fraction
             )));
         }
+        if self.iterations > MAX_ITERATIONS {
+            return Err(DetectError::Options(format!(
+                "refit.iterations = {} must be within 0..={MAX_ITERATIONS}",
+                self.iterations
+            )));
+        }
         within("margin_px", self.margin_px, 0.0, 50.0)?;
         within("plateau_cap", self.plateau_cap, 0.0, 10.0)?;
         if !(8..=super::sections::MAX_SECTIONS).contains(&self.section_bins) {
@@ -112,6 +118,10 @@ impl RefitOptions {
         Ok(())
     }
 }
+
+/// The most fits per row a configuration may ask for (a second fit already gains nothing
+/// measurable; a hostile value would keep the detector busy on one image).
+pub const MAX_ITERATIONS: usize = 16;
 
 /// Checks that the refit option `name` is finite and within `lo..=hi`.
 fn within(name: &str, value: f64, lo: f64, hi: f64) -> Result<(), DetectError> {
@@ -617,6 +627,35 @@ mod tests {
     use crate::detect::mask::{build_mask, MaskOptions};
     use crate::detect::Method;
     use crate::sphere::axis_angle;
+
+    #[test]
+    fn too_many_fits_or_a_bad_band_are_named() {
+        for (o, key) in [
+            (
+                RefitOptions {
+                    iterations: MAX_ITERATIONS + 1,
+                    ..RefitOptions::default()
+                },
+                "refit.iterations",
+            ),
+            (
+                RefitOptions {
+                    margin_px: f64::NAN,
+                    ..RefitOptions::default()
+                },
+                "refit.margin_px",
+            ),
+        ] {
+            let e = o.validate().unwrap_err().to_string();
+            assert!(e.contains(key), "{e}");
+        }
+        assert!(RefitOptions {
+            iterations: MAX_ITERATIONS,
+            ..RefitOptions::default()
+        }
+        .validate()
+        .is_ok());
+    }
 
     #[test]
     fn refit_finds_the_intensity_centre_of_an_antialiased_row() {
