@@ -167,6 +167,18 @@ impl PencilOptions {
                 )));
             }
         }
+        if !(0.25..=1000.0).contains(&self.bin_px) {
+            return Err(DetectError::Options(format!(
+                "pencil.bin_px = {} must be within 0.25..=1000",
+                self.bin_px
+            )));
+        }
+        if !(1.0..=1000.0).contains(&self.search_step_px) {
+            return Err(DetectError::Options(format!(
+                "pencil.search_step_px = {} must be within 1..=1000",
+                self.search_step_px
+            )));
+        }
         if self.refine_iterations > 64 {
             return Err(DetectError::Options(format!(
                 "pencil.refine_iterations = {} must be within 0..=64",
@@ -1067,6 +1079,26 @@ mod tests {
         };
         let e = PencilRows::new(o, 15.0, &Mounting::default()).unwrap_err();
         assert!(e.to_string().contains("pencil.refine_iterations"), "{e}");
+        // a grid or histogram step too fine to finish is refused by name
+        for (o, key) in [
+            (
+                PencilOptions {
+                    search_step_px: 1e-6,
+                    ..PencilOptions::default()
+                },
+                "pencil.search_step_px",
+            ),
+            (
+                PencilOptions {
+                    bin_px: 1e-6,
+                    ..PencilOptions::default()
+                },
+                "pencil.bin_px",
+            ),
+        ] {
+            let e = PencilRows::new(o, 15.0, &Mounting::default()).unwrap_err();
+            assert!(e.to_string().contains(key), "{e}");
+        }
     }
 
     #[test]
