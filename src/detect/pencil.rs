@@ -99,6 +99,17 @@ pub struct PencilOptions {
 /// Step of the comb's reference angles (degrees), before two halvings around the best.
 const COMB_ROLL_STEP_DEG: f64 = 2.0;
 
+/// Checks that the pencil option `name` is within `lo..=hi` (a NaN is not).
+fn within(name: &str, value: f64, lo: f64, hi: f64) -> Result<(), DetectError> {
+    if (lo..=hi).contains(&value) {
+        Ok(())
+    } else {
+        Err(DetectError::Options(format!(
+            "pencil.{name} = {value} must be within {lo}..={hi}"
+        )))
+    }
+}
+
 /// The comb's search on a profile whose rows are at least `sep` bins apart: periods from
 /// `sep` to `comb_max_period_px`, a peak on a tooth within half of `sep`.
 fn comb_search(sep: usize, opts: &PencilOptions) -> CombSearch {
@@ -167,18 +178,8 @@ impl PencilOptions {
                 )));
             }
         }
-        if !(0.25..=1000.0).contains(&self.bin_px) {
-            return Err(DetectError::Options(format!(
-                "pencil.bin_px = {} must be within 0.25..=1000",
-                self.bin_px
-            )));
-        }
-        if !(1.0..=1000.0).contains(&self.search_step_px) {
-            return Err(DetectError::Options(format!(
-                "pencil.search_step_px = {} must be within 1..=1000",
-                self.search_step_px
-            )));
-        }
+        within("bin_px", self.bin_px, 0.25, 1000.0)?;
+        within("search_step_px", self.search_step_px, 1.0, 1000.0)?;
         if self.refine_iterations > 64 {
             return Err(DetectError::Options(format!(
                 "pencil.refine_iterations = {} must be within 0..=64",
@@ -197,48 +198,23 @@ impl PencilOptions {
                 "pencil.polish_max_band_deg = {b} must be within (0, 30]"
             )));
         }
-        if !(-1.0..=1.0).contains(&self.comb_min_contrast) {
-            return Err(DetectError::Options(format!(
-                "pencil.comb_min_contrast = {} must be within -1..=1",
-                self.comb_min_contrast
-            )));
-        }
+        within("comb_min_contrast", self.comb_min_contrast, -1.0, 1.0)?;
         if !(self.comb_weak_prominence >= 0.0 && self.comb_weak_prominence.is_finite()) {
             return Err(DetectError::Options(format!(
                 "pencil.comb_weak_prominence = {} must be >= 0",
                 self.comb_weak_prominence
             )));
         }
-        if !(0.0..=60.0).contains(&self.comb_max_roll_deg) {
-            return Err(DetectError::Options(format!(
-                "pencil.comb_max_roll_deg = {} must be within 0..=60",
-                self.comb_max_roll_deg
-            )));
-        }
-        if !(0.0..=10.0).contains(&self.comb_power) {
-            return Err(DetectError::Options(format!(
-                "pencil.comb_power = {} must be within 0..=10",
-                self.comb_power
-            )));
-        }
-        if !(0.0..=10.0).contains(&self.coverage_power) {
-            return Err(DetectError::Options(format!(
-                "pencil.coverage_power = {} must be within 0..=10",
-                self.coverage_power
-            )));
-        }
+        within("comb_max_roll_deg", self.comb_max_roll_deg, 0.0, 60.0)?;
+        within("comb_power", self.comb_power, 0.0, 10.0)?;
+        within("coverage_power", self.coverage_power, 0.0, 10.0)?;
         if !(self.max_heading_deg > 0.0 && self.max_heading_deg <= 90.0) {
             return Err(DetectError::Options(format!(
                 "pencil.max_heading_deg = {} must be within (0, 90]",
                 self.max_heading_deg
             )));
         }
-        if !(0.0..=1.0).contains(&self.min_peak_fraction) {
-            return Err(DetectError::Options(format!(
-                "pencil.min_peak_fraction = {} must be within 0..=1",
-                self.min_peak_fraction
-            )));
-        }
+        within("min_peak_fraction", self.min_peak_fraction, 0.0, 1.0)?;
         if !(self.min_prominence >= 0.0 && self.min_prominence.is_finite()) {
             return Err(DetectError::Options(format!(
                 "pencil.min_prominence = {} must be >= 0",
