@@ -39,7 +39,7 @@ fn run(det: &mut Detector, data: &[u8], prior: Option<&DetectorPrior>) -> Detect
 
 #[test]
 fn a_true_prior_is_taken_and_a_wrong_one_falls_back_to_the_full_search() {
-    for method in [Method::Combined, Method::Hough] {
+    for method in [Method::Combined, Method::Hough, Method::Strips] {
         for seed in 1..4 {
             let (cal, data, truth) = scene(seed);
             let opts = DetectorOptions {

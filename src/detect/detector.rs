@@ -445,7 +445,7 @@ impl VanishingStage {
 /// ([`Detector::process_with_prior`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum PriorOutcome {
-    /// No prior (or the pencil method): the full search ran.
+    /// No prior (or the pencil method, which ignores it): the full search ran.
     #[default]
     None,
     /// The narrowed search found a vanishing point inside the prior's window.
@@ -597,7 +597,9 @@ impl Detector {
     /// prior's window are, and the vanishing point is sought there. When that gives no
     /// vanishing point inside the window, the full search runs on the same prepared points
     /// (and edge rows), so the answer is never worse than without a prior.
-    /// [`Detector::last_prior`] tells which happened. The pencil method ignores the prior.
+    /// [`Detector::last_prior`] tells which happened. The strips method searches its vanishing
+    /// point only in the window ([`super::strips::StripsRows::set_window`]); the pencil
+    /// method ignores the prior.
     pub fn process_with_prior(
         &mut self,
         view: &ImageView,
@@ -608,8 +610,7 @@ impl Detector {
         let checked = prior
             .map(|p| p.validate().map(|v| (v, p.window_rad)))
             .transpose()?;
-        let window =
-            checked.filter(|_| !matches!(self.opts.method, Method::Pencil | Method::Strips));
+        let window = checked.filter(|_| self.opts.method != Method::Pencil);
         let t0 = Instant::now();
         self.last_prepare = self.prep.run(view, &mut self.points)?;
         let t1 = Instant::now();
@@ -617,11 +618,9 @@ impl Detector {
         let Some((vp, w)) = window else {
             return self.detect_prepared(out, t0, t1, true);
         };
-        self.hough.set_window(Some((&vp, w)));
-        self.vanish.finder.set_window(Some((&vp, w)));
+        self.set_windows(Some((&vp, w)));
         let narrowed = self.detect_prepared(out, t0, t1, true);
-        self.hough.set_window(None);
-        self.vanish.finder.set_window(None);
+        self.set_windows(None);
         narrowed?;
         let inside = out
             .vanishing_point
@@ -636,6 +635,15 @@ impl Detector {
         self.times.hough += spent;
         self.last_prior = PriorOutcome::FullSearch;
         Ok(())
+    }
+
+    /// Narrows (or widens again, `None`) the searches of the rows and their vanishing point.
+    fn set_windows(&mut self, window: Option<(&Vector3<f64>, f64)>) {
+        self.hough.set_window(window);
+        self.vanish.finder.set_window(window);
+        if let Some(s) = self.strips.as_mut() {
+            s.set_window(window);
+        }
     }
 
     /// What the prior did in the last image.

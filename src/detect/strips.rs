@@ -49,6 +49,9 @@ pub struct StripsOptions {
     pub search_step_px: f64,
     /// How many of the coarse grid's best local maxima are refined to 1 px.
     pub search_starts: usize,
+    /// The grid is first evaluated at twice its step, and then in full only within one
+    /// coarse step of that coarser grid's this many best local maxima (0: the whole grid).
+    pub search_regions: usize,
     /// At each step of the search, the peaks' uncertainty is widened by this times the
     /// step (0: `peak_sigma_px` at every step).
     pub search_blur: f64,
@@ -98,6 +101,7 @@ impl Default for StripsOptions {
             peak_sigma_px: 4.5,
             search_step_px: 8.0,
             search_starts: 1,
+            search_regions: 6,
             search_blur: 0.0,
             max_heading_deg: 25.0,
             min_depth_px: 20.0,
@@ -176,6 +180,12 @@ impl StripsOptions {
             return bad(&format!(
                 "search_starts = {} must be within 1..=64",
                 self.search_starts
+            ));
+        }
+        if self.search_regions > 1024 {
+            return bad(&format!(
+                "search_regions = {} must be within 0..=1024",
+                self.search_regions
             ));
         }
         if !(self.max_heading_deg.is_finite() && (0.0..80.0).contains(&self.max_heading_deg)) {
@@ -298,8 +308,13 @@ pub struct StripsRows {
     peaks: Vec<Peak>,
     /// The coarse search's grid of agreements and the local maxima refined from it.
     grid: Vec<f64>,
+    /// The prior's vanishing point (unit) and window half-angle, when narrowed.
+    prior: Option<(Vector3<f64>, f64)>,
     starts: Vec<(f64, f64, f64)>,
     seen: Vec<Seen>,
+    /// The peaks below a candidate before sorting, and their sort keys.
+    unsorted: Vec<Seen>,
+    keys: Vec<u64>,
     /// The comb's teeth that are rows: u, weight and the number of peaks on them.
     teeth: Vec<[f64; 3]>,
     last: StripsResult,
@@ -376,8 +391,11 @@ impl StripsRows {
             scratch: Vec::new(),
             peaks: Vec::new(),
             grid: Vec::new(),
+            prior: None,
             starts: Vec::new(),
             seen: Vec::new(),
+            unsorted: Vec::new(),
+            keys: Vec::new(),
             teeth: Vec::new(),
             last: StripsResult::default(),
         })
@@ -615,74 +633,180 @@ impl StripsRows {
     }
 
     /// The vanishing point whose pencil lines the strips' peaks up best: a coarse grid over
-    /// the window, then halving steps around the best. (along, below, agreement).
+    /// the window (or the prior's box within it, [`Self::set_window`]), then halving steps
+    /// around the best. (along, below, agreement). With a prior, `None` also when the box's
+    /// best lies on an edge the box adds to the window: the agreement still rises beyond
+    /// it, so the rows' vanishing point is outside the prior's window.
     fn search(&mut self) -> Option<(f64, f64, f64)> {
         if self.peaks.len() < 4 {
             return None;
         }
-        let [a0, a1, p0, p1] = self.window()?;
-        let step = self.opts.search_step_px;
+        let full = self.window()?;
+        let (bx, step, regions) = match self.prior_box() {
+            None => (full, self.opts.search_step_px, self.opts.search_regions),
+            Some(b) => {
+                let bx = [
+                    b[0].max(full[0]),
+                    b[1].min(full[1]),
+                    b[2].max(full[2]),
+                    b[3].min(full[3]),
+                ];
+                if bx[0] > bx[1] || bx[2] > bx[3] {
+                    return None;
+                }
+                // a small box: its whole grid, fine enough to have an inside
+                let side = (bx[1] - bx[0]).min(bx[3] - bx[2]);
+                ((bx), (side / 8.0).clamp(1.0, self.opts.search_step_px), 0)
+            }
+        };
+        let [a0, a1, p0, p1] = bx;
         let na = ((a1 - a0) / step).ceil() as usize + 1;
         let np = ((p1 - p0) / step).ceil() as usize + 1;
         if na * np > 1_000_000 {
             return None;
         }
-        self.grid.clear();
-        for j in 0..np {
-            for i in 0..na {
-                let e = self.agreement(
-                    a0 + i as f64 * step,
-                    p0 + j as f64 * step,
-                    self.sigma_at(step),
-                );
-                self.grid.push(e);
-            }
-        }
+        self.fill_grid(a0, p0, na, np, step, regions);
         // the grid's best local maxima, each refined by halving steps
         self.starts.clear();
         for j in 0..np {
             for i in 0..na {
                 let e = self.grid[j * na + i];
-                let higher = NEIGHBOURS.iter().any(|&(di, dj)| {
-                    let (x, y) = (i as i64 + di as i64, j as i64 + dj as i64);
-                    x >= 0
-                        && y >= 0
-                        && (x as usize) < na
-                        && (y as usize) < np
-                        && self.grid[y as usize * na + x as usize] > e
-                });
-                if e > 0.0 && !higher {
-                    self.starts
-                        .push((e, a0 + i as f64 * step, p0 + j as f64 * step));
+                if e > 0.0 && !self.higher_near(i, j, na, np, 1, e) {
+                    self.starts.push((e, i as f64, j as f64));
                 }
             }
         }
         self.starts.sort_unstable_by(|x, y| y.0.total_cmp(&x.0));
         self.starts.truncate(self.opts.search_starts);
+        if let (Some(&(_, i, j)), true) = (self.starts.first(), bx != full) {
+            let (i, j) = (i as usize, j as usize);
+            let edge = (i == 0 && bx[0] > full[0])
+                || (i + 1 == na && bx[1] < full[1])
+                || (j == 0 && bx[2] > full[2])
+                || (j + 1 == np && bx[3] < full[3]);
+            if edge {
+                return None;
+            }
+        }
         let mut best = (f64::MIN, 0.0, 0.0);
         for k in 0..self.starts.len() {
-            let mut here = self.starts[k];
-            let mut st = 0.5 * step;
-            while st >= 1.0 {
-                let (_, ca, cp) = here;
-                let sig = self.sigma_at(st);
-                if self.opts.search_blur > 0.0 {
-                    here.0 = self.agreement(ca, cp, sig);
-                }
-                for (da, dp) in NEIGHBOURS {
-                    let (a, p) = (ca + da * st, cp + dp * st);
-                    let e = self.agreement(a, p, sig);
-                    if e > here.0 {
-                        here = (e, a, p);
-                    }
-                }
-                st *= 0.5;
-            }
+            let (e, i, j) = self.starts[k];
+            let here = self.refine((e, a0 + i * step, p0 + j * step), step);
             if here.0 > best.0 {
                 best = here;
             }
         }
         (best.0 > 0.0).then_some((best.1, best.2, best.0))
+    }
+
+    /// A grid point (agreement, along, below) climbed by halving steps from `step` / 2
+    /// down to 1 px.
+    fn refine(&mut self, mut here: (f64, f64, f64), step: f64) -> (f64, f64, f64) {
+        let mut st = 0.5 * step;
+        while st >= 1.0 {
+            let (_, ca, cp) = here;
+            let sig = self.sigma_at(st);
+            if self.opts.search_blur > 0.0 {
+                here.0 = self.agreement(ca, cp, sig);
+            }
+            for (da, dp) in NEIGHBOURS {
+                let (a, p) = (ca + da * st, cp + dp * st);
+                let e = self.agreement(a, p, sig);
+                if e > here.0 {
+                    here = (e, a, p);
+                }
+            }
+            st *= 0.5;
+        }
+        here
+    }
+
+    /// The prior's window (set by [`Self::set_window`]) as a box in the virtual image
+    /// (along from, to, below from, to): around the projections of the directions `w` from
+    /// its vanishing point. `None` without a prior or when the window leaves the image
+    /// plane.
+    fn prior_box(&self) -> Option<[f64; 4]> {
+        let (vp, w) = self.prior?;
+        let vp = if vp.z < 0.0 { vp } else { -vp };
+        let e1 = crate::sphere::any_perpendicular(&vp);
+        let e2 = vp.cross(&e1);
+        let (sw, cw) = w.sin_cos();
+        let [mut a0, mut p0] = self.to_virtual(&vp)?;
+        let (mut a1, mut p1) = (a0, p0);
+        for (x, y) in NEIGHBOURS {
+            let n = (x * x + y * y).sqrt();
+            let d = vp * cw + (e1 * x + e2 * y) * (sw / n);
+            let [a, p] = self.to_virtual(&d)?;
+            a0 = a0.min(a);
+            a1 = a1.max(a);
+            p0 = p0.min(p);
+            p1 = p1.max(p);
+        }
+        Some([a0, a1, p0, p1])
+    }
+
+    /// Narrows the next searches to a prior's window (`vp` the expected vanishing point,
+    /// sign free; `w` the window's half-angle, radians), or widens them again (`None`).
+    pub fn set_window(&mut self, window: Option<(&Vector3<f64>, f64)>) {
+        self.prior = window.map(|(vp, w)| (vp.normalize(), w));
+    }
+
+    /// The agreement on the grid of `na` × `np` candidates `step` apart from (a0, p0) into
+    /// `self.grid`. With `regions` > 0 only where it can hold the grid's best: every other
+    /// candidate first (a grid twice as coarse), then the full grid within one coarse step
+    /// of that coarse grid's `regions` best local maxima; the candidates not evaluated are
+    /// NaN, and so neither a maximum nor higher than one.
+    #[allow(clippy::too_many_arguments)]
+    fn fill_grid(&mut self, a0: f64, p0: f64, na: usize, np: usize, step: f64, regions: usize) {
+        let sig = self.sigma_at(step);
+        self.grid.clear();
+        self.grid.resize(na * np, f64::NAN);
+        let stride = if regions == 0 { 1 } else { 2 };
+        for j in (0..np).step_by(stride) {
+            for i in (0..na).step_by(stride) {
+                self.grid[j * na + i] =
+                    self.agreement(a0 + i as f64 * step, p0 + j as f64 * step, sig);
+            }
+        }
+        if regions == 0 {
+            return;
+        }
+        self.starts.clear();
+        for j in (0..np).step_by(2) {
+            for i in (0..na).step_by(2) {
+                let e = self.grid[j * na + i];
+                if e > 0.0 && !self.higher_near(i, j, na, np, 2, e) {
+                    self.starts.push((e, i as f64, j as f64));
+                }
+            }
+        }
+        self.starts.sort_unstable_by(|x, y| y.0.total_cmp(&x.0));
+        self.starts.truncate(regions);
+        for k in 0..self.starts.len() {
+            let (_, ci, cj) = self.starts[k];
+            let (ci, cj) = (ci as usize, cj as usize);
+            for j in cj.saturating_sub(2)..(cj + 3).min(np) {
+                for i in ci.saturating_sub(2)..(ci + 3).min(na) {
+                    if self.grid[j * na + i].is_nan() {
+                        self.grid[j * na + i] =
+                            self.agreement(a0 + i as f64 * step, p0 + j as f64 * step, sig);
+                    }
+                }
+            }
+        }
+    }
+
+    /// Whether a grid neighbour `reach` cells from (i, j) (one of the eight directions) is
+    /// higher than `e`.
+    fn higher_near(&self, i: usize, j: usize, na: usize, np: usize, reach: i64, e: f64) -> bool {
+        NEIGHBOURS.iter().any(|&(di, dj)| {
+            let (x, y) = (i as i64 + di as i64 * reach, j as i64 + dj as i64 * reach);
+            x >= 0
+                && y >= 0
+                && (x as usize) < na
+                && (y as usize) < np
+                && self.grid[y as usize * na + x as usize] > e
+        })
     }
 
     /// The peaks' position uncertainty for a search at grid step `step`: `peak_sigma_px`
@@ -696,20 +820,30 @@ impl StripsRows {
     /// Fills `self.seen` with the peaks below the candidate (a, p), sorted by u; returns the
     /// share of the peaks' count that is there.
     fn see(&mut self, a: f64, p: f64, sig: f64) -> f64 {
-        self.seen.clear();
+        self.unsorted.clear();
+        self.keys.clear();
         let min_d = self.opts.min_depth_px;
         for k in &self.peaks {
             let d = k.p - p;
             if d > min_d {
-                self.seen.push(Seen {
-                    u: (k.a - a) / d,
+                let u = (k.a - a) / d;
+                self.keys.push(sort_key(u, self.unsorted.len()));
+                self.unsorted.push(Seen {
+                    u,
                     s: sig / d,
                     w: k.w,
                     strip: k.strip,
                 });
             }
         }
-        self.seen.sort_unstable_by(|x, y| x.u.total_cmp(&y.u));
+        // sorting 8-byte keys and gathering is faster than sorting the peaks themselves
+        self.keys.sort_unstable();
+        self.seen.clear();
+        self.seen.extend(
+            self.keys
+                .iter()
+                .map(|&k| self.unsorted[(k & 0xffff_ffff) as usize]),
+        );
         self.seen.len() as f64 / self.peaks.len().max(1) as f64
     }
 
@@ -863,6 +997,14 @@ fn prominence(sm: &[f64], i: usize, win: usize) -> f64 {
     }
 }
 
+/// A key that sorts as `u` (rounded to f32, which orders all but near-equal values the
+/// same) with the index `i` (below 2³²) in its low half.
+fn sort_key(u: f64, i: usize) -> u64 {
+    let b = (u as f32).to_bits();
+    let ordered = if b >> 31 == 1 { !b } else { b | 0x8000_0000 };
+    ((ordered as u64) << 32) | (i as u64 & 0xffff_ffff)
+}
+
 /// How many different strips the peaks (sorted by u) come from.
 fn distinct_strips(on: &[Seen]) -> usize {
     let mut n = 0;
@@ -1006,6 +1148,81 @@ mod tests {
                 assert!(a.normal.dot(&b.normal).abs() < 0.9999, "duplicate rows");
             }
         }
+    }
+
+    /// The field of [`rows_and_vanishing_point_of_a_flat_field`] with scattered weeds: its
+    /// vanishing point found with `opts`, and the candidates evaluated.
+    fn search_with(
+        opts: StripsOptions,
+        window: Option<(&Vector3<f64>, f64)>,
+    ) -> (Vector3<f64>, usize) {
+        let m = forward_camera();
+        let mut fld = field(300.0, 512.0, &m, 0.5, 0.1, 5f64.to_radians());
+        let mut rnd = uniform(7);
+        let cam_from_robot = m.robot_from_camera().inverse();
+        for _ in 0..4000 {
+            let (x, y) = (1.0 + 20.0 * rnd(), 8.0 * (rnd() - 0.5));
+            fld.see(
+                &(cam_from_robot * Vector3::new(x, y, -m.height_m)),
+                300.0,
+                512.0,
+            );
+        }
+        let mut s = StripsRows::new(opts, 15.0, &m).unwrap();
+        s.set_window(window);
+        let mut rows = Vec::new();
+        let vp = s
+            .find(&fld.rays, &fld.weights, &fld.pixel_rad, &mut rows)
+            .unwrap()
+            .expect("a vanishing point");
+        (vp, s.last().evaluated)
+    }
+
+    #[test]
+    fn the_coarse_grid_finds_the_full_grids_vanishing_point_for_a_third_of_the_work() {
+        let full = StripsOptions {
+            search_regions: 0,
+            ..StripsOptions::default()
+        };
+        let (vp_full, n_full) = search_with(full, None);
+        let (vp, n) = search_with(StripsOptions::default(), None);
+        assert!(
+            vp.dot(&vp_full).abs() > 1.0 - 1e-12,
+            "{vp:?} against {vp_full:?}"
+        );
+        assert!(3 * n < n_full, "{n} candidates evaluated against {n_full}");
+    }
+
+    #[test]
+    fn a_window_narrows_the_search_and_a_window_beside_the_rows_finds_nothing() {
+        let (vp_full, n_full) = search_with(StripsOptions::default(), None);
+        let w = 2f64.to_radians();
+        let (vp, n) = search_with(StripsOptions::default(), Some((&vp_full, w)));
+        // the same summit, found on a finer grid: within the last step's pixel
+        assert!(vp.dot(&vp_full).abs().min(1.0).acos() < 1.5 / 300.0);
+        assert!(5 * n < n_full, "{n} candidates evaluated against {n_full}");
+        // a window 8° to the side: the agreement rises towards its edge, so no answer
+        let m = forward_camera();
+        let side = m.robot_from_camera().inverse()
+            * (Rotation3::from_axis_angle(&Vector3::z_axis(), 13f64.to_radians()) * Vector3::x());
+        let fld = field(300.0, 512.0, &m, 0.5, 0.1, 5f64.to_radians());
+        let mut s = StripsRows::new(StripsOptions::default(), 15.0, &m).unwrap();
+        s.set_window(Some((&side, w)));
+        let mut rows = Vec::new();
+        let got = s
+            .find(&fld.rays, &fld.weights, &fld.pixel_rad, &mut rows)
+            .unwrap();
+        assert!(
+            got.is_none() && rows.is_empty(),
+            "{got:?}, {} rows",
+            rows.len()
+        );
+        // widened again: the full search's answer
+        s.set_window(None);
+        let again = s
+            .find(&fld.rays, &fld.weights, &fld.pixel_rad, &mut rows)
+            .unwrap();
+        assert!(again.is_some_and(|v| v.dot(&vp_full).abs() > 1.0 - 1e-6));
     }
 
     #[test]
@@ -1193,6 +1410,13 @@ mod tests {
                     ..StripsOptions::default()
                 },
                 "kept_share",
+            ),
+            (
+                StripsOptions {
+                    search_regions: 100_000,
+                    ..StripsOptions::default()
+                },
+                "search_regions",
             ),
         ] {
             let e = o.validate().unwrap_err().to_string();
