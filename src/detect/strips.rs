@@ -656,7 +656,7 @@ impl StripsRows {
                 }
                 // a small box: its whole grid, fine enough to have an inside
                 let side = (bx[1] - bx[0]).min(bx[3] - bx[2]);
-                ((bx), (side / 8.0).clamp(1.0, self.opts.search_step_px), 0)
+                (bx, (side / 8.0).clamp(1.0, self.opts.search_step_px), 0)
             }
         };
         let [a0, a1, p0, p1] = bx;
@@ -756,7 +756,6 @@ impl StripsRows {
     /// candidate first (a grid twice as coarse), then the full grid within one coarse step
     /// of that coarse grid's `regions` best local maxima; the candidates not evaluated are
     /// NaN, and so neither a maximum nor higher than one.
-    #[allow(clippy::too_many_arguments)]
     fn fill_grid(&mut self, a0: f64, p0: f64, na: usize, np: usize, step: f64, regions: usize) {
         let sig = self.sigma_at(step);
         self.grid.clear();
