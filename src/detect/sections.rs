@@ -64,6 +64,8 @@ pub struct Sections {
     f1: Vector3<f64>,
     f2: Vector3<f64>,
     count: usize,
+    /// Bins per radian (`count` / 2π, once rather than at every pixel).
+    per_rad: f32,
     bins: [Bin; MAX_SECTIONS],
     centres: [Centre; MAX_SECTIONS],
 }
@@ -74,11 +76,13 @@ impl Sections {
     pub fn new(n: &Vector3<f64>, count: usize) -> Self {
         let f1 = crate::sphere::any_perpendicular(n);
         let f2 = n.cross(&f1);
+        let count = count.clamp(8, MAX_SECTIONS);
         Sections {
             n: *n,
             f1,
             f2,
-            count: count.clamp(8, MAX_SECTIONS),
+            count,
+            per_rad: count as f32 / std::f32::consts::TAU,
             bins: [Bin::default(); MAX_SECTIONS],
             centres: [Centre::default(); MAX_SECTIONS],
         }
@@ -93,7 +97,7 @@ impl Sections {
     /// and weight `w`.
     #[inline]
     pub fn add(&mut self, s: f32, d: f32, w: f64) {
-        let k = ((s + std::f32::consts::PI) * (self.count as f32 / std::f32::consts::TAU)) as usize;
+        let k = ((s + std::f32::consts::PI) * self.per_rad) as usize;
         let b = &mut self.bins[k.min(self.count - 1)];
         let (s, d) = (s as f64, d as f64);
         b.w += w;
