@@ -20,8 +20,9 @@ pub struct DetectArgs {
     /// OCamCalib calib_results.txt or omnirow TOML calibration.
     #[arg(long, value_name = "FILE")]
     pub calib: PathBuf,
-    /// Row-detection method [default: the configuration's, else auto: pencil for a
-    /// perspective camera's narrow field of view, combined for an omnidirectional lens].
+    /// Row-detection method [default: the configuration's, else auto: strips for a
+    /// forward-looking perspective camera, pencil for a narrow lens looking down, combined
+    /// for an omnidirectional lens].
     #[arg(long, value_enum)]
     pub method: Option<MethodArg>,
     /// Take the detector's options from the `[detector]` section of this node
