@@ -667,16 +667,7 @@ impl StripsRows {
         }
         self.fill_grid(a0, p0, na, np, step, regions);
         // the grid's best local maxima, each refined by halving steps
-        self.starts.clear();
-        for j in 0..np {
-            for i in 0..na {
-                let e = self.grid[j * na + i];
-                if e > 0.0 && !self.higher_near(i, j, na, np, 1, e) {
-                    self.starts.push((e, i as f64, j as f64));
-                }
-            }
-        }
-        self.starts.sort_unstable_by(|x, y| y.0.total_cmp(&x.0));
+        self.grid_maxima(na, np, 1);
         self.starts.truncate(self.opts.search_starts);
         if let (Some(&(_, i, j)), true) = (self.starts.first(), bx != full) {
             let (i, j) = (i as usize, j as usize);
@@ -770,16 +761,7 @@ impl StripsRows {
         if regions == 0 {
             return;
         }
-        self.starts.clear();
-        for j in (0..np).step_by(2) {
-            for i in (0..na).step_by(2) {
-                let e = self.grid[j * na + i];
-                if e > 0.0 && !self.higher_near(i, j, na, np, 2, e) {
-                    self.starts.push((e, i as f64, j as f64));
-                }
-            }
-        }
-        self.starts.sort_unstable_by(|x, y| y.0.total_cmp(&x.0));
+        self.grid_maxima(na, np, 2);
         self.starts.truncate(regions);
         for k in 0..self.starts.len() {
             let (_, ci, cj) = self.starts[k];
@@ -793,6 +775,21 @@ impl StripsRows {
                 }
             }
         }
+    }
+
+    /// The local maxima (agreement, column, row) of the `na` × `np` grid read every
+    /// `stride`-th point, into `self.starts`, best first.
+    fn grid_maxima(&mut self, na: usize, np: usize, stride: usize) {
+        self.starts.clear();
+        for j in (0..np).step_by(stride) {
+            for i in (0..na).step_by(stride) {
+                let e = self.grid[j * na + i];
+                if e > 0.0 && !self.higher_near(i, j, na, np, stride as i64, e) {
+                    self.starts.push((e, i as f64, j as f64));
+                }
+            }
+        }
+        self.starts.sort_unstable_by(|x, y| y.0.total_cmp(&x.0));
     }
 
     /// Whether a grid neighbour `reach` cells from (i, j) (one of the eight directions) is
