@@ -20,7 +20,7 @@ pub use super::options::{Binning, CombinedOptions, DetectorOptions, REFERENCE_PA
 use super::pencil::{Candidate, PencilResult, PencilRows};
 use super::pose::heading_tilt;
 use super::prior::DetectorPrior;
-use super::refit::{refit_rows, RefitImage, Tiles};
+use super::refit::{refit_rows, RefitImage, RowFits, Tiles};
 use super::smooth::Gaussian;
 use super::strips::{StripsResult, StripsRows};
 use super::threshold::{keep_brightest, ThresholdResult};
@@ -98,8 +98,9 @@ pub struct Preparer {
     kept: Vec<u32>,
     /// The refit's pixels near one row (room for every valid pixel, reserved at setup).
     candidates: Vec<u32>,
-    /// Per row of the last refit: the variance of its normal along the vanishing point.
-    along_var: Vec<f64>,
+    /// Per row of the last refit: the variance of its normal along the vanishing point, and
+    /// the curved rows' points beside the robot.
+    fits: RowFits,
     last_threshold: ThresholdResult,
 }
 
@@ -129,7 +130,7 @@ impl Preparer {
             tmp: Vec::new(),
             kept: Vec::new(),
             candidates: Vec::new(),
-            along_var: Vec::with_capacity(256),
+            fits: RowFits::with_capacity(256),
             last_threshold: ThresholdResult::default(),
         })
     }
@@ -365,6 +366,7 @@ impl Preparer {
             pixel_angle: s.pixel_angle,
             model: &s.work_cal.model,
             background: bg.round().clamp(0.0, 254.0) as u8,
+            near: self.near_field(),
         };
         refit_rows(
             &img,
@@ -374,14 +376,31 @@ impl Preparer {
             perspective,
             &self.opts.refit,
             &mut self.candidates,
-            &mut self.along_var,
+            &mut self.fits,
         )
+    }
+
+    /// The curved rows of the last refit: their points beside the robot.
+    pub fn near_feet(&self) -> &[super::refit::NearFoot] {
+        &self.fits.feet
+    }
+
+    /// The rows' near part for the refit's near-field fit, from the mounting (`None`
+    /// when `refit.near_reach_m` is 0).
+    fn near_field(&self) -> Option<super::sections::NearField> {
+        let r = &self.opts.refit;
+        let m = &self.cal.mounting;
+        (r.near_reach_m > 0.0).then(|| super::sections::NearField {
+            down: m.robot_from_camera().inverse() * -Vector3::z(),
+            reach: r.near_reach_m / m.height_m,
+            min_sigma: r.near_min_sigma,
+        })
     }
 
     /// Per row of the last refit given a vanishing point: the variance of the row normal's
     /// component along it, relative to the image's noise (NaN where not estimated).
     pub fn row_variances(&self) -> &[f64] {
-        &self.along_var
+        &self.fits.along_var
     }
 }
 
@@ -765,6 +784,7 @@ impl Detector {
         if method == Method::Hough && self.opts.refit.precision_weights {
             self.refit_hough_by_precision(out);
         }
+        self.turn_curved_rows(out);
         if method == Method::Combined && self.opts.combined.reject_edge_outliers {
             let sin_tol = self.opts.vanishing.inlier_deg().to_radians().sin();
             let v = out.vanishing_point.map(|v| v.direction);
@@ -783,6 +803,28 @@ impl Detector {
             vanishing: t4 - t3,
         };
         Ok(())
+    }
+
+    /// The curved rows of the refit ([`super::sections::Sections::near_foot`]) turned about
+    /// the final vanishing point through their point beside the robot: there the controller
+    /// steers. The vanishing point, found from the rows' whole chords, stays as it is.
+    fn turn_curved_rows(&self, out: &mut Detection) {
+        let feet = self.prep.near_feet();
+        let Some(vp) = out.vanishing_point.map(|v| v.direction) else {
+            return;
+        };
+        if feet.is_empty() {
+            return;
+        }
+        for r in out.rows.iter_mut().filter(|r| r.method == Method::Hough) {
+            let turned = feet
+                .iter()
+                .find(|f| f.normal == r.normal)
+                .and_then(|f| f.foot.cross(&vp).try_normalize(1e-9));
+            if let Some(n) = turned {
+                r.normal = crate::sphere::canonical(&n);
+            }
+        }
     }
 
     /// The edge and combined methods publish crop rows' centre lines, not boundaries

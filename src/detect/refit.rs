@@ -9,7 +9,7 @@
 //! visited by tiles: a tile is scanned only when its cone of rays meets the row's band.
 
 use super::hough::fast_atan2;
-use super::sections::Sections;
+use super::sections::{NearField, Sections};
 use super::{DetectError, Row};
 use crate::camera::OcamModel;
 use crate::sphere::{any_perpendicular, canonical, Scatter};
@@ -68,6 +68,15 @@ pub struct RefitOptions {
     /// power (2: the centre wanders by a share of the width; higher: also the correlation of
     /// neighbouring sections within one wide plant).
     pub section_power: f64,
+    /// A curved row is published where it passes beside the robot: the sections within
+    /// this many metres ahead and behind the camera's foot (on the ground, with the
+    /// mounting's height) are fitted with a curvature, and where it is significant the row
+    /// is turned about the vanishing point through its point there, instead of lying on the
+    /// whole row's chord ([`Sections::near_foot`]). Only where the lens sees the row on both
+    /// sides of the foot (omnidirectional lenses). 0: the whole row's fit always.
+    pub near_reach_m: f64,
+    /// The curvature counts when it is at least this many of its standard deviations.
+    pub near_min_sigma: f64,
 }
 
 impl Default for RefitOptions {
@@ -86,6 +95,8 @@ impl Default for RefitOptions {
             section_bins: 256,
             section_huber: 1.5,
             section_power: 4.0,
+            near_reach_m: 2.0,
+            near_min_sigma: 4.0,
         }
     }
 }
@@ -115,7 +126,54 @@ impl RefitOptions {
         }
         within("section_huber", self.section_huber, 0.0, 100.0)?;
         within("section_power", self.section_power, 0.0, 8.0)?;
+        within("near_reach_m", self.near_reach_m, 0.0, 1000.0)?;
+        within("near_min_sigma", self.near_min_sigma, 0.0, 1000.0)?;
         Ok(())
+    }
+}
+
+/// What the refit measured of its rows, in buffers reused from image to image.
+#[derive(Debug, Clone, Default)]
+pub struct RowFits {
+    /// Per row: the variance of its normal's component along the vanishing point (NaN where
+    /// not estimated).
+    pub along_var: Vec<f64>,
+    /// The rows that bend near the robot ([`Sections::near_foot`]).
+    pub feet: Vec<NearFoot>,
+}
+
+impl RowFits {
+    pub fn with_capacity(rows: usize) -> Self {
+        RowFits {
+            along_var: Vec::with_capacity(rows),
+            feet: Vec::with_capacity(rows),
+        }
+    }
+}
+
+/// A curved row's point beside the camera's foot, with the normal the refit gave the row.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NearFoot {
+    pub normal: Vector3<f64>,
+    /// Unit ray to the row's centre at the foot.
+    pub foot: Vector3<f64>,
+}
+
+/// One row's fit.
+#[derive(Debug, Clone, Copy)]
+struct RowFit {
+    normal: Option<Vector3<f64>>,
+    along_var: f64,
+    foot: Option<Vector3<f64>>,
+}
+
+impl Default for RowFit {
+    fn default() -> Self {
+        RowFit {
+            normal: None,
+            along_var: f64::NAN,
+            foot: None,
+        }
     }
 }
 
@@ -220,6 +278,9 @@ pub struct RefitImage<'a> {
     pub model: &'a OcamModel,
     /// Pixels at or below this level weigh nothing (the background).
     pub background: u8,
+    /// Where the rows' near part is (the ground's normal, the reach in camera heights) for
+    /// the near-field fit ([`Sections::near_foot`]); `None`: the whole row's fit always.
+    pub near: Option<NearField>,
 }
 
 /// Samples around a row's great circle at which its cross-section is checked.
@@ -303,7 +364,7 @@ pub fn refit_rows(
     perspective: bool,
     opts: &RefitOptions,
     candidates: &mut Vec<u32>,
-    along_var: &mut Vec<f64>,
+    fits: &mut RowFits,
 ) -> Result<usize, DetectError> {
     if rows.len() != bands.len() {
         return Err(DetectError::Buffer(format!(
@@ -324,6 +385,50 @@ pub fn refit_rows(
             t.height, t.width
         )));
     }
+    let mut done = 0;
+    fits.along_var.clear();
+    fits.feet.clear();
+    for (row, &foot_band) in rows.iter_mut().zip(bands) {
+        let mut fit = RowFit::default();
+        refit_row(
+            img,
+            opts,
+            vp,
+            perspective,
+            foot_band,
+            &row.normal,
+            candidates,
+            &mut fit,
+        );
+        fits.along_var.push(fit.along_var);
+        if let Some(n) = fit.normal {
+            row.normal = canonical(&n);
+            done += 1;
+            if let Some(foot) = fit.foot {
+                fits.feet.push(NearFoot {
+                    normal: row.normal,
+                    foot,
+                });
+            }
+        }
+    }
+    Ok(done)
+}
+
+/// One row's fit (`refit_rows`) from the normal `start`, into `out` (its normal, or `None`
+/// when no fit succeeded; the variance along `vp` where estimated; the near-field foot where
+/// the row bends, [`Sections::near_foot`]).
+#[allow(clippy::too_many_arguments)]
+fn refit_row(
+    img: &RefitImage,
+    opts: &RefitOptions,
+    vp: Option<&Vector3<f64>>,
+    perspective: bool,
+    foot_band: f64,
+    start: &Vector3<f64>,
+    candidates: &mut Vec<u32>,
+    out: &mut RowFit,
+) {
     let margin = opts.margin_px * img.pixel_angle;
     // The normal moves by a fraction of a pixel between iterations: pixels are collected
     // once per row within its band widened by this, then each iteration reads only them.
@@ -331,139 +436,135 @@ pub fn refit_rows(
     let wedge = vp.filter(|_| opts.wedge);
     let vf = wedge.map_or([0f32; 3], |v| [v.x as f32, v.y as f32, v.z as f32]);
     let background = img.background;
-    let mut done = 0;
-    along_var.clear();
-    for (row, &foot_band) in rows.iter_mut().zip(bands) {
-        along_var.push(f64::NAN);
-        let mut n = row.normal;
-        collect_candidates(
-            img,
-            &n,
-            foot_band + slack,
-            margin + slack,
-            wedge,
-            candidates,
-        );
-        if opts.full_sections {
-            // Decided once per row: between iterations the circle moves by a fraction of a
-            // pixel, which leaves the stretches where its cross-section is whole unchanged.
-            keep_full_sections(img, &n, foot_band, margin, wedge, candidates);
-        }
-        let cap = plateau_cap(img.values, candidates, background, opts.plateau_cap);
-        let band = foot_band + margin;
-        let s_band = band.min(1.5).sin() as f32;
-        let (s_foot, s_margin) = (foot_band.min(1.5).sin() as f32, margin.sin() as f32);
-        let mut ok = false;
-        for _ in 0..opts.iterations {
-            let nf = [n.x as f32, n.y as f32, n.z as f32];
-            let mut sc = Scatter::new();
-            // Normal equations of the biased model: features (e1·p, e2·p, −(f·p)³), target −n·p.
-            let basis = vp.filter(|_| perspective).map(|v| {
-                let e2 = (v - n * n.dot(v)).normalize();
-                let e1 = n.cross(&e2);
-                (e1, e2)
-            });
-            let mut ata = nalgebra::Matrix3::<f64>::zeros();
-            let mut atb = Vector3::<f64>::zeros();
-            // Σ solid²·(n·p)²·p·pᵀ over the graded pixels (below the cap), whose noise moves
-            // the fit: for the variance of the normal (only without the perspective model).
-            let track = vp.is_some() && basis.is_none();
-            let mut noise = [0f64; 6];
-            let mut sections =
-                (opts.sections && basis.is_none()).then(|| Sections::new(&n, opts.section_bins));
-            let (f1, f2) = sections.as_ref().map_or(([0f32; 3], [0f32; 3]), |s| {
-                let (a, b) = s.frame();
-                (
-                    [a.x as f32, a.y as f32, a.z as f32],
-                    [b.x as f32, b.y as f32, b.z as f32],
-                )
-            });
-            for &i in candidates.iter() {
-                let i = i as usize;
-                let p = img.rays[i];
-                let d = (nf[0] * p[0] + nf[1] * p[1] + nf[2] * p[2]).abs();
-                if d >= s_band {
-                    continue;
-                }
-                if wedge.is_some() {
-                    let a = vf[0] * p[0] + vf[1] * p[1] + vf[2] * p[2];
-                    if d >= s_foot * (1.0 - a * a).max(0.0).sqrt() + s_margin {
-                        continue;
-                    }
-                }
-                let w = (img.values[i].min(cap) - background) as f64 * img.solid[i] as f64;
-                let pv = Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64);
-                if let Some((e1, e2)) = basis {
-                    let g = e1.dot(&pv);
-                    let phi = Vector3::new(g, e2.dot(&pv), -g * g * g);
-                    ata += w * phi * phi.transpose();
-                    atb += w * phi * -n.dot(&pv);
-                } else {
-                    sc.add(&pv, w);
-                    if let Some(sec) = sections.as_mut() {
-                        let along = fast_atan2(
-                            f2[0] * p[0] + f2[1] * p[1] + f2[2] * p[2],
-                            f1[0] * p[0] + f1[1] * p[1] + f1[2] * p[2],
-                        );
-                        sec.add(along, nf[0] * p[0] + nf[1] * p[1] + nf[2] * p[2], w);
-                    }
-                    if track && img.values[i] < cap {
-                        let k = (img.solid[i] as f64 * d as f64).powi(2);
-                        let (x, y, z) = (pv.x, pv.y, pv.z);
-                        noise[0] += k * x * x;
-                        noise[1] += k * x * y;
-                        noise[2] += k * x * z;
-                        noise[3] += k * y * y;
-                        noise[4] += k * y * z;
-                        noise[5] += k * z * z;
-                    }
-                }
-            }
-            if let Some((e1, e2)) = basis {
-                match ata.try_inverse() {
-                    Some(inv) => {
-                        let x = inv * atb;
-                        if !x.iter().all(|v| v.is_finite()) || x[0].hypot(x[1]) > 0.1 {
-                            break;
-                        }
-                        n = (n + e1 * x[0] + e2 * x[1]).normalize();
-                        ok = true;
-                    }
-                    None => break,
-                }
+    let mut n = *start;
+    let mut foot = None;
+    collect_candidates(
+        img,
+        &n,
+        foot_band + slack,
+        margin + slack,
+        wedge,
+        candidates,
+    );
+    if opts.full_sections {
+        // Decided once per row: between iterations the circle moves by a fraction of a
+        // pixel, which leaves the stretches where its cross-section is whole unchanged.
+        keep_full_sections(img, &n, foot_band, margin, wedge, candidates);
+    }
+    let cap = plateau_cap(img.values, candidates, background, opts.plateau_cap);
+    let band = foot_band + margin;
+    let s_band = band.min(1.5).sin() as f32;
+    let (s_foot, s_margin) = (foot_band.min(1.5).sin() as f32, margin.sin() as f32);
+    let mut ok = false;
+    for _ in 0..opts.iterations {
+        let nf = [n.x as f32, n.y as f32, n.z as f32];
+        let mut sc = Scatter::new();
+        // Normal equations of the biased model: features (e1·p, e2·p, −(f·p)³), target −n·p.
+        let basis = vp.filter(|_| perspective).map(|v| {
+            let e2 = (v - n * n.dot(v)).normalize();
+            let e1 = n.cross(&e2);
+            (e1, e2)
+        });
+        let mut ata = nalgebra::Matrix3::<f64>::zeros();
+        let mut atb = Vector3::<f64>::zeros();
+        // Σ solid²·(n·p)²·p·pᵀ over the graded pixels (below the cap), whose noise moves
+        // the fit: for the variance of the normal (only without the perspective model).
+        let track = vp.is_some() && basis.is_none();
+        let mut noise = [0f64; 6];
+        let mut sections =
+            (opts.sections && basis.is_none()).then(|| Sections::new(&n, opts.section_bins));
+        let (f1, f2) = sections.as_ref().map_or(([0f32; 3], [0f32; 3]), |s| {
+            let (a, b) = s.frame();
+            (
+                [a.x as f32, a.y as f32, a.z as f32],
+                [b.x as f32, b.y as f32, b.z as f32],
+            )
+        });
+        for &i in candidates.iter() {
+            let i = i as usize;
+            let p = img.rays[i];
+            let d = (nf[0] * p[0] + nf[1] * p[1] + nf[2] * p[2]).abs();
+            if d >= s_band {
                 continue;
             }
-            match sc.fit() {
-                Some(f) if f.degeneracy < 0.5 => {
-                    n = f.normal;
-                    ok = true;
-                    if let Some(sf) = sections
-                        .as_mut()
-                        .and_then(|s| s.fit(&f.normal, vp, opts.section_huber, opts.section_power))
-                    {
-                        n = canonical(&sf.normal);
-                        if track {
-                            *along_var.last_mut().expect("pushed") = sf.along_var;
-                        }
-                    } else if let (true, Some(v)) = (track, vp) {
-                        let m = nalgebra::Matrix3::new(
-                            noise[0], noise[1], noise[2], noise[1], noise[3], noise[4], noise[2],
-                            noise[4], noise[5],
-                        );
-                        let lambda = f.mean_sq_residual * f.weight;
-                        *along_var.last_mut().expect("pushed") =
-                            along_variance(&n, v, &sc.matrix(), lambda, &m);
-                    }
+            if wedge.is_some() {
+                let a = vf[0] * p[0] + vf[1] * p[1] + vf[2] * p[2];
+                if d >= s_foot * (1.0 - a * a).max(0.0).sqrt() + s_margin {
+                    continue;
                 }
-                _ => break,
+            }
+            let w = (img.values[i].min(cap) - background) as f64 * img.solid[i] as f64;
+            let pv = Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+            if let Some((e1, e2)) = basis {
+                let g = e1.dot(&pv);
+                let phi = Vector3::new(g, e2.dot(&pv), -g * g * g);
+                ata += w * phi * phi.transpose();
+                atb += w * phi * -n.dot(&pv);
+            } else {
+                sc.add(&pv, w);
+                if let Some(sec) = sections.as_mut() {
+                    let along = fast_atan2(
+                        f2[0] * p[0] + f2[1] * p[1] + f2[2] * p[2],
+                        f1[0] * p[0] + f1[1] * p[1] + f1[2] * p[2],
+                    );
+                    sec.add(along, nf[0] * p[0] + nf[1] * p[1] + nf[2] * p[2], w);
+                }
+                if track && img.values[i] < cap {
+                    let k = (img.solid[i] as f64 * d as f64).powi(2);
+                    let (x, y, z) = (pv.x, pv.y, pv.z);
+                    noise[0] += k * x * x;
+                    noise[1] += k * x * y;
+                    noise[2] += k * x * z;
+                    noise[3] += k * y * y;
+                    noise[4] += k * y * z;
+                    noise[5] += k * z * z;
+                }
             }
         }
-        if ok {
-            row.normal = canonical(&n);
-            done += 1;
+        if let Some((e1, e2)) = basis {
+            match ata.try_inverse() {
+                Some(inv) => {
+                    let x = inv * atb;
+                    if !x.iter().all(|v| v.is_finite()) || x[0].hypot(x[1]) > 0.1 {
+                        break;
+                    }
+                    n = (n + e1 * x[0] + e2 * x[1]).normalize();
+                    ok = true;
+                }
+                None => break,
+            }
+            continue;
+        }
+        match sc.fit() {
+            Some(f) if f.degeneracy < 0.5 => {
+                n = f.normal;
+                ok = true;
+                if let Some(sf) = sections
+                    .as_mut()
+                    .and_then(|s| s.fit(&f.normal, vp, opts.section_huber, opts.section_power))
+                {
+                    n = canonical(&sf.normal);
+                    foot = img
+                        .near
+                        .as_ref()
+                        .and_then(|nf| sections.as_ref().and_then(|s| s.near_foot(&sf.normal, nf)));
+                    if track {
+                        out.along_var = sf.along_var;
+                    }
+                } else if let (true, Some(v)) = (track, vp) {
+                    let m = nalgebra::Matrix3::new(
+                        noise[0], noise[1], noise[2], noise[1], noise[3], noise[4], noise[2],
+                        noise[4], noise[5],
+                    );
+                    let lambda = f.mean_sq_residual * f.weight;
+                    out.along_var = along_variance(&n, v, &sc.matrix(), lambda, &m);
+                }
+            }
+            _ => break,
         }
     }
-    Ok(done)
+    out.normal = ok.then_some(n);
+    out.foot = foot.filter(|_| ok);
 }
 
 /// The variance (up to the image's noise variance per unit value) of the component along
@@ -704,6 +805,7 @@ mod tests {
             pixel_angle: 0.0135,
             model: &cal.model,
             background: 10,
+            near: None,
         };
         // start 5 mrad off
         let start = (truth + Vector3::new(0.0, 0.0, 0.005)).normalize();
@@ -728,7 +830,7 @@ mod tests {
             false,
             &centroid,
             &mut cand,
-            &mut Vec::new(),
+            &mut RowFits::default(),
         )
         .unwrap();
         assert_eq!(n, 1);
@@ -746,7 +848,7 @@ mod tests {
             false,
             &RefitOptions::default(),
             &mut cand,
-            &mut Vec::new(),
+            &mut RowFits::default(),
         )
         .is_err());
     }

@@ -18,7 +18,7 @@
 //! the fit is the pixel fit's.
 
 use crate::sphere::Scatter;
-use nalgebra::{Matrix2, Vector3};
+use nalgebra::{Matrix2, Matrix3, Vector3};
 
 /// The largest number of bins (the bins live on the stack).
 pub const MAX_SECTIONS: usize = 1024;
@@ -68,6 +68,20 @@ pub struct Sections {
     per_rad: f32,
     bins: [Bin; MAX_SECTIONS],
     centres: [Centre; MAX_SECTIONS],
+    /// After [`Sections::fit`]: the centres in use and the variance model's (a, b).
+    fitted: usize,
+    model: (f64, f64),
+}
+
+/// Where a row's near part is fitted ([`Sections::near_foot`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NearField {
+    /// The ground's downward normal in the camera frame (unit).
+    pub down: Vector3<f64>,
+    /// How far along the row, ahead and behind, the near part reaches (camera heights).
+    pub reach: f64,
+    /// The bend must be this many of its standard deviations from zero to count.
+    pub min_sigma: f64,
 }
 
 impl Sections {
@@ -85,6 +99,8 @@ impl Sections {
             per_rad: count as f32 / std::f32::consts::TAU,
             bins: [Bin::default(); MAX_SECTIONS],
             centres: [Centre::default(); MAX_SECTIONS],
+            fitted: 0,
+            model: (0.0, 0.0),
         }
     }
 
@@ -160,6 +176,8 @@ impl Sections {
                 f.normal
             };
         }
+        self.fitted = m;
+        self.model = (a, b);
         let along_var = vp.map_or(f64::NAN, |v| along_variance(centres, &n, v, a, b));
         let (mean_w2, mean_m) = centres.iter().fold((0.0, 0.0), |acc, c| {
             (acc.0 + c.spread / m as f64, acc.1 + c.mass / m as f64)
@@ -171,6 +189,105 @@ impl Sections {
         })
     }
 }
+
+impl Sections {
+    /// After [`Sections::fit`] gave the circle `n`: where the row's sections bend off that
+    /// circle (a curved row), the ray to the row's point beside the camera's foot; else
+    /// `None` (the circle stands).
+    ///
+    /// The centres are taken to the ground plane (in camera heights, relative to the
+    /// camera's foot: `a` along the row's direction on the horizon, `y` across), those
+    /// within `reach` of the foot along the row fitted with `y = c0 + c1·a + c2·a²/2`, each
+    /// by the inverse of its variance (the fit's variance model carried to the ground) and
+    /// a Huber weight, the curvature's standard deviation scaled by the residuals. A bend of
+    /// fewer than `min_sigma` standard deviations is no bend: a straight row keeps the fit
+    /// over its whole length, which the far field makes the more precise. Otherwise the
+    /// row's point at `a = 0`, `y = c0`, is where the controller steers: a whole curved
+    /// row's circle is its chord, off the row there by a share of its sagitta. The row's
+    /// direction is best left to the chord and the other rows' (a symmetric arc's chord is
+    /// parallel to its tangent at the middle, and far more precise than the near part's
+    /// slope): the detector turns the row about the final vanishing point through this
+    /// point. The centres must reach a quarter of `reach` on both sides of the foot (an
+    /// omnidirectional lens sees beside the robot; a forward-looking camera does not, and
+    /// extrapolating its bend back to the robot made CRDLD's rows worse).
+    pub fn near_foot(&self, n: &Vector3<f64>, near: &NearField) -> Option<Vector3<f64>> {
+        let g = near.down;
+        let v = n.cross(&g);
+        if v.norm() < 0.05 {
+            return None;
+        }
+        let v = v.normalize();
+        let w = g.cross(&v);
+        let (a_m, b_m) = self.model;
+        let (ng, nw) = (n.dot(&g), n.dot(&w));
+        // Each centre on the ground: (a, y, weight of y), or None outside the near part.
+        let ground = |c: &Centre| {
+            let t = c.x.dot(&g);
+            if t < 0.05 {
+                return None;
+            }
+            let (a, y) = (c.x.dot(&v) / t, c.x.dot(&w) / t);
+            if a.abs() > near.reach {
+                return None;
+            }
+            // dy per radian of the centre's offset across the circle
+            let j = nw / t - y * ng / t;
+            let var = (a_m / c.mass + b_m * c.spread) * j * j;
+            (var > 0.0 && var.is_finite()).then_some((a, y, 1.0 / var))
+        };
+        let centres = &self.centres[..self.fitted];
+        let mut coef = Vector3::zeros();
+        // The variance model gives the centres' relative weights; their scale is the
+        // residuals' own (the model was fitted about the chord, whose misfit it absorbed).
+        let mut scale2 = f64::NAN;
+        for round in 0..ROUNDS_NEAR {
+            let (mut ata, mut aty) = (Matrix3::<f64>::zeros(), Vector3::<f64>::zeros());
+            let (mut chi2, mut k) = (0.0, 0usize);
+            let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+            for (a, y, wt) in centres.iter().filter_map(ground) {
+                let phi = Vector3::new(1.0, a, 0.5 * a * a);
+                let mut wt = wt;
+                if round > 0 {
+                    let r = y - phi.dot(&coef);
+                    if round > 1 {
+                        let z = r * (wt / scale2).sqrt();
+                        if z.abs() > HUBER_NEAR {
+                            wt *= HUBER_NEAR / z.abs();
+                        }
+                    }
+                    chi2 += r * r * wt;
+                }
+                ata += wt * phi * phi.transpose();
+                aty += wt * y * phi;
+                (lo, hi) = (lo.min(a), hi.max(a));
+                k += 1;
+            }
+            // The near part must be seen on both sides of the foot: a lens that sees only
+            // ahead (a forward-looking camera) would extrapolate the bend back to the robot.
+            if k < 8 || lo > -0.25 * near.reach || hi < 0.25 * near.reach {
+                return None;
+            }
+            let inv = ata.try_inverse()?;
+            if round > 0 {
+                scale2 = (chi2 / (k - 3) as f64).max(f64::MIN_POSITIVE);
+            }
+            coef = inv * aty;
+            if round == ROUNDS_NEAR - 1 {
+                let bend = coef[2] / (inv[(2, 2)] * scale2).sqrt();
+                if bend.is_nan() || bend.abs() < near.min_sigma {
+                    return None;
+                }
+                return (g + w * coef[0]).try_normalize(1e-12);
+            }
+        }
+        None
+    }
+}
+
+/// The near-field fit's Huber threshold (standard deviations) and its rounds (the first
+/// plain, the second measuring the residuals' scale, the rest robust).
+const HUBER_NEAR: f64 = 2.5;
+const ROUNDS_NEAR: usize = 4;
 
 /// The variance model's coefficients (a, b ≥ 0, a > 0) for centres about the circle of `n`:
 /// squared residuals regressed on (1/mass, width^p), each weighted by the inverse square of
@@ -318,5 +435,65 @@ mod tests {
         few.add(0.1, 0.0, 1.0);
         few.add(0.5, 0.0, 1.0);
         assert!(few.fit(&truth, None, 0.0, 2.0).is_none());
+    }
+
+    /// A row on flat ground 1 m below the camera (down = −z), `y0` across, bending as
+    /// `y0 + κ·a²/2` over 6 m ahead and behind; each 2 cm along it a cross-section of 20
+    /// pixels 4 cm wide with noise of 5 mm on the ground. Sections around the row's
+    /// straight line at `y0`, fitted.
+    fn ground_row(y0: f64, kappa: f64, seed: u64) -> (Sections, Vector3<f64>) {
+        let mut rng = Lcg(seed);
+        let chord = Vector3::new(0.0, y0, -1.0).cross(&Vector3::x()).normalize();
+        let mut s = Sections::new(&chord, 256);
+        let (f1, f2) = s.frame();
+        for k in 0..600 {
+            let a = -6.0 + 12.0 * (k as f64 + 0.5) / 600.0;
+            for j in 0..20 {
+                let y = y0 + kappa * a * a / 2.0 + 0.04 * ((j as f64 + 0.5) / 20.0 - 0.5);
+                let q = Vector3::new(a, y + 0.005 * rng.gauss(), -1.0).normalize();
+                s.add(
+                    q.dot(&f2).atan2(q.dot(&f1)) as f32,
+                    chord.dot(&q) as f32,
+                    1.0,
+                );
+            }
+        }
+        let fit = s.fit(&chord, None, 1.5, 4.0).unwrap();
+        (s, fit.normal)
+    }
+
+    #[test]
+    fn a_curved_rows_point_beside_the_robot_is_found_and_a_straight_one_stays() {
+        let near = NearField {
+            down: -Vector3::z(),
+            reach: 2.0,
+            min_sigma: 4.0,
+        };
+        for (y0, kappa) in [(0.4, 0.05), (-0.9, -0.1), (1.5, 0.1)] {
+            let (s, n) = ground_row(y0, kappa, 7);
+            let truth = Vector3::new(0.0, y0, -1.0).normalize();
+            // the whole row's circle misses the foot by a share of the sagitta
+            let chord_miss = n.dot(&truth).abs();
+            let foot = s.near_foot(&n, &near).expect("a bend");
+            let miss = axis_angle(&foot, &truth);
+            assert!(
+                miss < 1e-3 && miss < 0.1 * chord_miss,
+                "{y0} {kappa}: {miss} vs {chord_miss}"
+            );
+        }
+        for seed in 0..5 {
+            let (s, n) = ground_row(0.4, 0.0, seed);
+            assert!(s.near_foot(&n, &near).is_none(), "seed {seed}");
+        }
+        // A lens that sees only ahead: no foot.
+        let mut ahead = Sections::new(&Vector3::y(), 256);
+        let (f1, f2) = ahead.frame();
+        for k in 0..300 {
+            let a = 0.5 + 5.0 * k as f64 / 300.0;
+            let q = Vector3::new(a, 0.4 + 0.05 * a * a, -1.0).normalize();
+            ahead.add(q.dot(&f2).atan2(q.dot(&f1)) as f32, q.y as f32, 1.0);
+        }
+        let n = ahead.fit(&Vector3::y(), None, 1.5, 4.0);
+        assert!(n.is_some_and(|f| ahead.near_foot(&f.normal, &near).is_none()));
     }
 }
