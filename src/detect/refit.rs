@@ -389,8 +389,7 @@ pub fn refit_rows(
     fits.along_var.clear();
     fits.feet.clear();
     for (row, &foot_band) in rows.iter_mut().zip(bands) {
-        let mut fit = RowFit::default();
-        refit_row(
+        let fit = refit_row(
             img,
             opts,
             vp,
@@ -398,7 +397,6 @@ pub fn refit_rows(
             foot_band,
             &row.normal,
             candidates,
-            &mut fit,
         );
         fits.along_var.push(fit.along_var);
         if let Some(n) = fit.normal {
@@ -415,10 +413,9 @@ pub fn refit_rows(
     Ok(done)
 }
 
-/// One row's fit (`refit_rows`) from the normal `start`, into `out` (its normal, or `None`
-/// when no fit succeeded; the variance along `vp` where estimated; the near-field foot where
-/// the row bends, [`Sections::near_foot`]).
-#[allow(clippy::too_many_arguments)]
+/// One row's fit (`refit_rows`) from the normal `start`: its normal (`None` when no fit
+/// succeeded), the variance along `vp` where estimated, and the near-field foot where the row
+/// bends ([`Sections::near_foot`]).
 fn refit_row(
     img: &RefitImage,
     opts: &RefitOptions,
@@ -427,8 +424,7 @@ fn refit_row(
     foot_band: f64,
     start: &Vector3<f64>,
     candidates: &mut Vec<u32>,
-    out: &mut RowFit,
-) {
+) -> RowFit {
     let margin = opts.margin_px * img.pixel_angle;
     // The normal moves by a fraction of a pixel between iterations: pixels are collected
     // once per row within its band widened by this, then each iteration reads only them.
@@ -437,7 +433,7 @@ fn refit_row(
     let vf = wedge.map_or([0f32; 3], |v| [v.x as f32, v.y as f32, v.z as f32]);
     let background = img.background;
     let mut n = *start;
-    let mut foot = None;
+    let mut out = RowFit::default();
     collect_candidates(
         img,
         &n,
@@ -539,12 +535,14 @@ fn refit_row(
             Some(f) if f.degeneracy < 0.5 => {
                 n = f.normal;
                 ok = true;
+                // a foot belongs to the normal it was found with
+                out.foot = None;
                 if let Some(sf) = sections
                     .as_mut()
                     .and_then(|s| s.fit(&f.normal, vp, opts.section_huber, opts.section_power))
                 {
                     n = canonical(&sf.normal);
-                    foot = img
+                    out.foot = img
                         .near
                         .as_ref()
                         .and_then(|nf| sections.as_ref().and_then(|s| s.near_foot(&sf.normal, nf)));
@@ -564,7 +562,7 @@ fn refit_row(
         }
     }
     out.normal = ok.then_some(n);
-    out.foot = foot.filter(|_| ok);
+    out
 }
 
 /// The variance (up to the image's noise variance per unit value) of the component along

@@ -240,6 +240,7 @@ impl Sections {
         // The variance model gives the centres' relative weights; their scale is the
         // residuals' own (the model was fitted about the chord, whose misfit it absorbed).
         let mut scale2 = f64::NAN;
+        let mut inv = Matrix3::zeros();
         for round in 0..ROUNDS_NEAR {
             let (mut ata, mut aty) = (Matrix3::<f64>::zeros(), Vector3::<f64>::zeros());
             let (mut chi2, mut k) = (0.0, 0usize);
@@ -267,20 +268,17 @@ impl Sections {
             if k < 8 || lo > -0.25 * near.reach || hi < 0.25 * near.reach {
                 return None;
             }
-            let inv = ata.try_inverse()?;
+            inv = ata.try_inverse()?;
             if round > 0 {
                 scale2 = (chi2 / (k - 3) as f64).max(f64::MIN_POSITIVE);
             }
             coef = inv * aty;
-            if round == ROUNDS_NEAR - 1 {
-                let bend = coef[2] / (inv[(2, 2)] * scale2).sqrt();
-                if bend.is_nan() || bend.abs() < near.min_sigma {
-                    return None;
-                }
-                return (g + w * coef[0]).try_normalize(1e-12);
-            }
         }
-        None
+        let bend = coef[2] / (inv[(2, 2)] * scale2).sqrt();
+        if bend.is_nan() || bend.abs() < near.min_sigma {
+            return None;
+        }
+        (g + w * coef[0]).try_normalize(1e-12)
     }
 }
 
