@@ -322,7 +322,7 @@ fn soak_with_packet_loss_counts_add_up_and_nothing_leaks() {
     let secs: u64 = std::env::var("OMNIROW_SOAK_SECS")
         .ok()
         .and_then(|v| v.parse().ok())
-        .unwrap_or(45);
+        .unwrap_or(20);
     let sim = Simulator::start("SIMSOAK", Some(0.5));
     let (tx, rx) = crossbeam_channel::bounded(2);
     let mut cfg = config(&sim.serial, 2448, 2048);
