@@ -519,6 +519,8 @@ pub struct Detector {
     paired_inliers: Vec<bool>,
     /// The crop rows' centre lines from the edge boundaries ([`super::centre`]).
     centre: CentreLines,
+    /// The edge method's centre lines' half-widths, as the refit's bands.
+    centre_bands: Vec<f64>,
     pair_scratch: Vec<(f64, usize, super::combine::Kind)>,
     times: StageTimes,
     last_prepare: PrepareResult,
@@ -589,6 +591,7 @@ impl Detector {
             paired_rows: Vec::with_capacity(128),
             paired_inliers: Vec::with_capacity(128),
             centre: CentreLines::default(),
+            centre_bands: Vec::with_capacity(64),
             pair_scratch: Vec::with_capacity(128),
             times: StageTimes::default(),
             last_prepare: PrepareResult::default(),
@@ -795,6 +798,9 @@ impl Detector {
         if method != Method::Hough {
             self.publish_centre_lines(out);
         }
+        if method == Method::Edge {
+            self.refit_centre_lines(out)?;
+        }
         let t4 = Instant::now();
         self.times = StageTimes {
             prepare: t1 - t0,
@@ -816,7 +822,7 @@ impl Detector {
         if feet.is_empty() {
             return;
         }
-        for r in out.rows.iter_mut().filter(|r| r.method == Method::Hough) {
+        for r in out.rows.iter_mut() {
             let turned = feet
                 .iter()
                 .find(|f| f.normal == r.normal)
@@ -825,6 +831,28 @@ impl Detector {
                 r.normal = crate::sphere::canonical(&n);
             }
         }
+    }
+
+    /// The edge method's centre lines, each the bisector of two boundaries, refitted on the
+    /// image's pixels between them as the Hough rows are (the band: half the row's width at
+    /// its foot), and the curved ones turned through their point beside the robot
+    /// ([`Self::turn_curved_rows`]). A bisector of the boundaries' great circles is not the
+    /// row's centre line: the boundaries are each off by their own edge's bias, and the
+    /// angle halfway between two lines on the ground is not the line halfway between them.
+    fn refit_centre_lines(&mut self, out: &mut Detection) -> Result<(), DetectError> {
+        let Some(vp) = out.vanishing_point.map(|v| v.direction) else {
+            return Ok(());
+        };
+        if out.rows.is_empty() {
+            return Ok(());
+        }
+        self.centre_bands.clear();
+        self.centre_bands
+            .extend(out.rows.iter().map(|r| 0.5 * r.width_rad));
+        self.prep
+            .refit(&mut out.rows, &self.centre_bands, Some(&vp), false)?;
+        self.turn_curved_rows(out);
+        Ok(())
     }
 
     /// The edge and combined methods publish crop rows' centre lines, not boundaries
