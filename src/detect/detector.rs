@@ -787,7 +787,11 @@ impl Detector {
         if method == Method::Hough && self.opts.refit.precision_weights {
             self.refit_hough_by_precision(out);
         }
-        self.turn_curved_rows(out);
+        // The edge method's rows are refitted, and turned, once they are centre lines; its
+        // feet here would be the last frame's.
+        if method != Method::Edge {
+            self.turn_curved_rows(out);
+        }
         if method == Method::Combined && self.opts.combined.reject_edge_outliers {
             let sin_tol = self.opts.vanishing.inlier_deg().to_radians().sin();
             let v = out.vanishing_point.map(|v| v.direction);
@@ -843,9 +847,6 @@ impl Detector {
         let Some(vp) = out.vanishing_point.map(|v| v.direction) else {
             return Ok(());
         };
-        if out.rows.is_empty() {
-            return Ok(());
-        }
         self.centre_bands.clear();
         self.centre_bands
             .extend(out.rows.iter().map(|r| 0.5 * r.width_rad));
