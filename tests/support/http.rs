@@ -33,10 +33,13 @@ impl Node {
             .stderr(Stdio::null())
             .spawn()
             .unwrap();
-        let node = Node { child, addr };
+        let mut node = Node { child, addr };
         let t0 = Instant::now();
         loop {
-            if TcpStream::connect(&node.addr).is_ok() {
+            if let Ok(Some(status)) = node.child.try_wait() {
+                panic!("the node exited before serving: {status}");
+            }
+            if serving(&node.addr) {
                 let (code, _, body) = node.get("/status");
                 assert_eq!(code, 200);
                 let s: serde_json::Value = serde_json::from_slice(&body).unwrap();
@@ -71,6 +74,13 @@ impl Drop for Node {
             let _ = self.child.wait();
         }
     }
+}
+
+/// Whether something listens on `addr`. Before the node listens, a connection to its port
+/// can succeed on the client's own socket (TCP's simultaneous open, when the kernel picks
+/// that port as the client's ephemeral one): that is not the node.
+fn serving(addr: &str) -> bool {
+    TcpStream::connect(addr).is_ok_and(|s| s.local_addr().ok() != s.peer_addr().ok())
 }
 
 /// One HTTP/1.1 request with `Connection: close`: (status code, head, body). Checks that the
