@@ -9,11 +9,11 @@ use omnirow::camera::{ideal_fisheye, ideal_pal, Calibration};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-fn tmpdir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("omnirow-detect-cli-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+#[path = "support/scratch.rs"]
+mod scratch;
+
+fn tmpdir(name: &str) -> scratch::Scratch {
+    scratch::Scratch::new("detect-cli", name)
 }
 
 fn save_png(path: &Path, w: u32, h: u32, data: &[u8]) {

@@ -16,11 +16,13 @@ pub fn bin() -> Command {
     c
 }
 
-pub fn tmpdir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("omnirow-node-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+#[path = "scratch.rs"]
+mod scratch;
+pub use scratch::Scratch;
+
+/// The test's scratch directory (removed when the test passes).
+pub fn tmpdir(name: &str) -> Scratch {
+    Scratch::new("node", name)
 }
 
 /// A small, fast synthetic drive (the detector's accuracy is guarded elsewhere).
