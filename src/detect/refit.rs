@@ -430,8 +430,6 @@ fn refit_row(
     // once per row within its band widened by this, then each iteration reads only them.
     let slack = 2.0 * img.pixel_angle;
     let wedge = vp.filter(|_| opts.wedge);
-    let vf = wedge.map_or([0f32; 3], |v| [v.x as f32, v.y as f32, v.z as f32]);
-    let background = img.background;
     let mut n = *start;
     let mut out = RowFit::default();
     collect_candidates(
@@ -447,115 +445,51 @@ fn refit_row(
         // pixel, which leaves the stretches where its cross-section is whole unchanged.
         keep_full_sections(img, &n, foot_band, margin, wedge, candidates);
     }
-    let cap = plateau_cap(img.values, candidates, background, opts.plateau_cap);
-    let band = foot_band + margin;
-    let s_band = band.min(1.5).sin() as f32;
-    let (s_foot, s_margin) = (foot_band.min(1.5).sin() as f32, margin.sin() as f32);
+    let band = Band {
+        s_band: (foot_band + margin).min(1.5).sin() as f32,
+        s_foot: foot_band.min(1.5).sin() as f32,
+        s_margin: margin.sin() as f32,
+        wedge: wedge.map(|v| [v.x as f32, v.y as f32, v.z as f32]),
+        cap: plateau_cap(img.values, candidates, img.background, opts.plateau_cap),
+    };
+    // Noise only matters for the variance along the vanishing point.
+    let track = vp.is_some();
     let mut ok = false;
     for _ in 0..opts.iterations {
-        let nf = [n.x as f32, n.y as f32, n.z as f32];
-        let mut sc = Scatter::new();
-        // Normal equations of the biased model: features (e1·p, e2·p, −(f·p)³), target −n·p.
-        let basis = vp.filter(|_| perspective).map(|v| {
-            let e2 = (v - n * n.dot(v)).normalize();
-            let e1 = n.cross(&e2);
-            (e1, e2)
-        });
-        let mut ata = nalgebra::Matrix3::<f64>::zeros();
-        let mut atb = Vector3::<f64>::zeros();
-        // Σ solid²·(n·p)²·p·pᵀ over the graded pixels (below the cap), whose noise moves
-        // the fit: for the variance of the normal (only without the perspective model).
-        let track = vp.is_some() && basis.is_none();
-        let mut noise = [0f64; 6];
-        let mut sections =
-            (opts.sections && basis.is_none()).then(|| Sections::new(&n, opts.section_bins));
-        let (f1, f2) = sections.as_ref().map_or(([0f32; 3], [0f32; 3]), |s| {
-            let (a, b) = s.frame();
-            (
-                [a.x as f32, a.y as f32, a.z as f32],
-                [b.x as f32, b.y as f32, b.z as f32],
-            )
-        });
-        for &i in candidates.iter() {
-            let i = i as usize;
-            let p = img.rays[i];
-            let d = (nf[0] * p[0] + nf[1] * p[1] + nf[2] * p[2]).abs();
-            if d >= s_band {
-                continue;
-            }
-            if wedge.is_some() {
-                let a = vf[0] * p[0] + vf[1] * p[1] + vf[2] * p[2];
-                if d >= s_foot * (1.0 - a * a).max(0.0).sqrt() + s_margin {
-                    continue;
-                }
-            }
-            let w = (img.values[i].min(cap) - background) as f64 * img.solid[i] as f64;
-            let pv = Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64);
-            if let Some((e1, e2)) = basis {
-                let g = e1.dot(&pv);
-                let phi = Vector3::new(g, e2.dot(&pv), -g * g * g);
-                ata += w * phi * phi.transpose();
-                atb += w * phi * -n.dot(&pv);
-            } else {
-                sc.add(&pv, w);
-                if let Some(sec) = sections.as_mut() {
-                    let along = fast_atan2(
-                        f2[0] * p[0] + f2[1] * p[1] + f2[2] * p[2],
-                        f1[0] * p[0] + f1[1] * p[1] + f1[2] * p[2],
-                    );
-                    sec.add(along, nf[0] * p[0] + nf[1] * p[1] + nf[2] * p[2], w);
-                }
-                if track && img.values[i] < cap {
-                    let k = (img.solid[i] as f64 * d as f64).powi(2);
-                    let (x, y, z) = (pv.x, pv.y, pv.z);
-                    noise[0] += k * x * x;
-                    noise[1] += k * x * y;
-                    noise[2] += k * x * z;
-                    noise[3] += k * y * y;
-                    noise[4] += k * y * z;
-                    noise[5] += k * z * z;
-                }
-            }
-        }
-        if let Some((e1, e2)) = basis {
-            match ata.try_inverse() {
-                Some(inv) => {
-                    let x = inv * atb;
-                    if !x.iter().all(|v| v.is_finite()) || x[0].hypot(x[1]) > 0.1 {
-                        break;
-                    }
-                    n = (n + e1 * x[0] + e2 * x[1]).normalize();
+        if let Some(v) = vp.filter(|_| perspective) {
+            match perspective_step(img, &band, candidates, &n, v) {
+                Some(m) => {
+                    n = m;
                     ok = true;
+                    continue;
                 }
                 None => break,
             }
-            continue;
         }
-        match sc.fit() {
-            Some(f) if f.degeneracy < 0.5 => {
+        if opts.sections {
+            let sec = section_step(img, &band, candidates, &n, opts, vp);
+            if let Some(sf) = sec.fit {
+                n = canonical(&sf.normal);
+                ok = true;
+                out.foot = img
+                    .near
+                    .as_ref()
+                    .and_then(|nf| sec.sections.near_foot(&sf.normal, nf));
+                if track {
+                    out.along_var = sf.along_var;
+                }
+                continue;
+            }
+        }
+        match pixel_fit(img, &band, candidates, &n, track) {
+            Some((f, noise)) if f.degeneracy < 0.5 => {
                 n = f.normal;
                 ok = true;
                 // a foot belongs to the normal it was found with
                 out.foot = None;
-                if let Some(sf) = sections
-                    .as_mut()
-                    .and_then(|s| s.fit(&f.normal, vp, opts.section_huber, opts.section_power))
-                {
-                    n = canonical(&sf.normal);
-                    out.foot = img
-                        .near
-                        .as_ref()
-                        .and_then(|nf| sections.as_ref().and_then(|s| s.near_foot(&sf.normal, nf)));
-                    if track {
-                        out.along_var = sf.along_var;
-                    }
-                } else if let (true, Some(v)) = (track, vp) {
-                    let m = nalgebra::Matrix3::new(
-                        noise[0], noise[1], noise[2], noise[1], noise[3], noise[4], noise[2],
-                        noise[4], noise[5],
-                    );
+                if let Some(v) = vp {
                     let lambda = f.mean_sq_residual * f.weight;
-                    out.along_var = along_variance(&n, v, &sc.matrix(), lambda, &m);
+                    out.along_var = along_variance(&n, v, &f.matrix, lambda, &noise);
                 }
             }
             _ => break,
@@ -563,6 +497,172 @@ fn refit_row(
     }
     out.normal = ok.then_some(n);
     out
+}
+
+/// A row's band as its pixels are read: half-width `s_band` (sine of the angle), or with a
+/// vanishing point the wedge `s_foot`·(sine of the angle from it) + `s_margin`; values above
+/// `cap` clipped to it.
+struct Band {
+    s_band: f32,
+    s_foot: f32,
+    s_margin: f32,
+    wedge: Option<[f32; 3]>,
+    cap: u8,
+}
+
+impl Band {
+    /// The signed offset n·p of pixel `i` from the circle of `nf` and its weight (value above
+    /// the background times solid angle), or `None` outside the band.
+    #[inline]
+    fn read(&self, img: &RefitImage, nf: &[f32; 3], i: usize) -> Option<(f32, f64)> {
+        let p = img.rays[i];
+        let ds = nf[0] * p[0] + nf[1] * p[1] + nf[2] * p[2];
+        let d = ds.abs();
+        if d >= self.s_band {
+            return None;
+        }
+        if let Some(vf) = &self.wedge {
+            let a = vf[0] * p[0] + vf[1] * p[1] + vf[2] * p[2];
+            if d >= self.s_foot * (1.0 - a * a).max(0.0).sqrt() + self.s_margin {
+                return None;
+            }
+        }
+        let w = (img.values[i].min(self.cap) - img.background) as f64 * img.solid[i] as f64;
+        Some((ds, w))
+    }
+}
+
+fn to_f32(v: &Vector3<f64>) -> [f32; 3] {
+    [v.x as f32, v.y as f32, v.z as f32]
+}
+
+/// One fit of the perspective model: the biased strip's normal equations (features
+/// (e1·p, e2·p, −(e1·p)³), target −n·p) about `n` towards the vanishing point `v`; the new
+/// normal, or `None` when the system is singular or the step implausible.
+fn perspective_step(
+    img: &RefitImage,
+    band: &Band,
+    candidates: &[u32],
+    n: &Vector3<f64>,
+    v: &Vector3<f64>,
+) -> Option<Vector3<f64>> {
+    let e2 = (v - n * n.dot(v)).normalize();
+    let e1 = n.cross(&e2);
+    let nf = to_f32(n);
+    let mut ata = nalgebra::Matrix3::<f64>::zeros();
+    let mut atb = Vector3::<f64>::zeros();
+    for &i in candidates {
+        let i = i as usize;
+        let Some((_, w)) = band.read(img, &nf, i) else {
+            continue;
+        };
+        let p = img.rays[i];
+        let pv = Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+        let g = e1.dot(&pv);
+        let phi = Vector3::new(g, e2.dot(&pv), -g * g * g);
+        ata += w * phi * phi.transpose();
+        atb += w * phi * -n.dot(&pv);
+    }
+    let x = ata.try_inverse()? * atb;
+    if !x.iter().all(|v| v.is_finite()) || x[0].hypot(x[1]) > 0.1 {
+        return None;
+    }
+    Some((n + e1 * x[0] + e2 * x[1]).normalize())
+}
+
+/// The row's cross-sections about `n` and their fit, started from their mass-weighted fit
+/// (`fit` is `None` when either is degenerate).
+struct SectionStep {
+    sections: Sections,
+    fit: Option<super::sections::SectionFit>,
+}
+
+fn section_step(
+    img: &RefitImage,
+    band: &Band,
+    candidates: &[u32],
+    n: &Vector3<f64>,
+    opts: &RefitOptions,
+    vp: Option<&Vector3<f64>>,
+) -> SectionStep {
+    let nf = to_f32(n);
+    let mut sections = Sections::new(n, opts.section_bins);
+    let (f1, f2) = sections.frame();
+    let (f1, f2) = (to_f32(&f1), to_f32(&f2));
+    for &i in candidates {
+        let i = i as usize;
+        let Some((d, w)) = band.read(img, &nf, i) else {
+            continue;
+        };
+        let p = img.rays[i];
+        let along = fast_atan2(
+            f2[0] * p[0] + f2[1] * p[1] + f2[2] * p[2],
+            f1[0] * p[0] + f1[1] * p[1] + f1[2] * p[2],
+        );
+        sections.add(along, d, w);
+    }
+    let fit = sections
+        .mass_fit()
+        .filter(|f| f.degeneracy < 0.5)
+        .and_then(|f| sections.fit(&f.normal, vp, opts.section_huber, opts.section_power));
+    SectionStep { sections, fit }
+}
+
+/// The plain pixel fit about `n`: the smallest eigenvector of the weighted scatter, with its
+/// matrix, and (with `track`) Σ solid²·(n·p)²·p·pᵀ over the graded pixels (below the cap),
+/// whose noise moves the fit: for the variance of the normal.
+fn pixel_fit(
+    img: &RefitImage,
+    band: &Band,
+    candidates: &[u32],
+    n: &Vector3<f64>,
+    track: bool,
+) -> Option<(PixelFit, nalgebra::Matrix3<f64>)> {
+    let nf = to_f32(n);
+    let mut sc = Scatter::new();
+    let mut noise = [0f64; 6];
+    for &i in candidates {
+        let i = i as usize;
+        let Some((d, w)) = band.read(img, &nf, i) else {
+            continue;
+        };
+        let p = img.rays[i];
+        let pv = Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+        sc.add(&pv, w);
+        if track && img.values[i] < band.cap {
+            let k = (img.solid[i] as f64 * d.abs() as f64).powi(2);
+            let (x, y, z) = (pv.x, pv.y, pv.z);
+            noise[0] += k * x * x;
+            noise[1] += k * x * y;
+            noise[2] += k * x * z;
+            noise[3] += k * y * y;
+            noise[4] += k * y * z;
+            noise[5] += k * z * z;
+        }
+    }
+    let f = sc.fit()?;
+    let noise = nalgebra::Matrix3::new(
+        noise[0], noise[1], noise[2], noise[1], noise[3], noise[4], noise[2], noise[4], noise[5],
+    );
+    Some((
+        PixelFit {
+            normal: f.normal,
+            degeneracy: f.degeneracy,
+            mean_sq_residual: f.mean_sq_residual,
+            weight: f.weight,
+            matrix: sc.matrix(),
+        },
+        noise,
+    ))
+}
+
+/// [`pixel_fit`]'s circle with its scatter matrix.
+struct PixelFit {
+    normal: Vector3<f64>,
+    degeneracy: f64,
+    mean_sq_residual: f64,
+    weight: f64,
+    matrix: nalgebra::Matrix3<f64>,
 }
 
 /// The variance (up to the image's noise variance per unit value) of the component along
