@@ -20,7 +20,7 @@ pub use super::options::{Binning, CombinedOptions, DetectorOptions, REFERENCE_PA
 use super::pencil::{Candidate, PencilResult, PencilRows};
 use super::pose::heading_tilt;
 use super::prior::DetectorPrior;
-use super::refit::{refit_rows, RefitImage, RowFits, Tiles};
+use super::refit::{refit_rows, Candidates, RefitImage, RowFits, Tiles};
 use super::smooth::Gaussian;
 use super::strips::{StripsResult, StripsRows};
 use super::threshold::{keep_brightest, ThresholdResult};
@@ -97,7 +97,7 @@ pub struct Preparer {
     tmp: Vec<u8>,
     kept: Vec<u32>,
     /// The refit's pixels near one row (room for every valid pixel, reserved at setup).
-    candidates: Vec<u32>,
+    candidates: Candidates,
     /// Per row of the last refit: the variance of its normal along the vanishing point, and
     /// the curved rows' points beside the robot.
     fits: RowFits,
@@ -129,7 +129,7 @@ impl Preparer {
             smoothed: GreyImage::default(),
             tmp: Vec::new(),
             kept: Vec::new(),
-            candidates: Vec::new(),
+            candidates: Candidates::default(),
             fits: RowFits::with_capacity(256),
             last_threshold: ThresholdResult::default(),
         })
@@ -270,7 +270,7 @@ impl Preparer {
         );
         self.tmp.resize(n, 0);
         self.kept.reserve(self.opts.threshold.target_points() + 1);
-        self.candidates = Vec::with_capacity(mask_result.valid);
+        self.candidates = Candidates::with_capacity(mask_result.valid);
         tracing::debug!(
             width = view.width,
             height = view.height,

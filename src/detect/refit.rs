@@ -159,6 +159,23 @@ pub struct NearFoot {
     pub foot: Vector3<f64>,
 }
 
+/// The pixels a row's refit reads, reused from row to row: their indices and, where
+/// computed, their angles along the row's starting great circle.
+#[derive(Debug, Clone, Default)]
+pub struct Candidates {
+    index: Vec<u32>,
+    along: Vec<f32>,
+}
+
+impl Candidates {
+    pub fn with_capacity(pixels: usize) -> Self {
+        Candidates {
+            index: Vec::with_capacity(pixels),
+            along: Vec::with_capacity(pixels),
+        }
+    }
+}
+
 /// One row's fit.
 #[derive(Debug, Clone, Copy)]
 struct RowFit {
@@ -363,7 +380,7 @@ pub fn refit_rows(
     vp: Option<&Vector3<f64>>,
     perspective: bool,
     opts: &RefitOptions,
-    candidates: &mut Vec<u32>,
+    candidates: &mut Candidates,
     fits: &mut RowFits,
 ) -> Result<usize, DetectError> {
     if rows.len() != bands.len() {
@@ -423,7 +440,7 @@ fn refit_row(
     perspective: bool,
     foot_band: f64,
     start: &Vector3<f64>,
-    candidates: &mut Vec<u32>,
+    cands: &mut Candidates,
 ) -> RowFit {
     let margin = opts.margin_px * img.pixel_angle;
     // The normal moves by a fraction of a pixel between iterations: pixels are collected
@@ -438,13 +455,20 @@ fn refit_row(
         foot_band + slack,
         margin + slack,
         wedge,
-        candidates,
+        &mut cands.index,
     );
+    // The angles along the start's circle serve the full sections and the first
+    // cross-section fit (whose frame is the start's).
+    let mut along_valid = opts.sections || opts.full_sections;
+    if along_valid {
+        angles_along(img, &n, cands);
+    }
     if opts.full_sections {
         // Decided once per row: between iterations the circle moves by a fraction of a
         // pixel, which leaves the stretches where its cross-section is whole unchanged.
-        keep_full_sections(img, &n, foot_band, margin, wedge, candidates);
+        keep_full_sections(img, &n, foot_band, margin, wedge, cands);
     }
+    let candidates = &cands.index;
     let band = Band {
         s_band: (foot_band + margin).min(1.5).sin() as f32,
         s_foot: foot_band.min(1.5).sin() as f32,
@@ -467,7 +491,9 @@ fn refit_row(
             }
         }
         if opts.sections {
-            let sec = section_step(img, &band, candidates, &n, opts, vp);
+            let along = along_valid.then_some(&cands.along[..]);
+            let sec = section_step(img, &band, candidates, along, &n, opts, vp);
+            along_valid = false;
             if let Some(sf) = sec.fit {
                 n = canonical(&sf.normal);
                 ok = true;
@@ -581,6 +607,7 @@ fn section_step(
     img: &RefitImage,
     band: &Band,
     candidates: &[u32],
+    along: Option<&[f32]>,
     n: &Vector3<f64>,
     opts: &RefitOptions,
     vp: Option<&Vector3<f64>>,
@@ -589,17 +616,22 @@ fn section_step(
     let mut sections = Sections::new(n, opts.section_bins);
     let (f1, f2) = sections.frame();
     let (f1, f2) = (to_f32(&f1), to_f32(&f2));
-    for &i in candidates {
+    for (k, &i) in candidates.iter().enumerate() {
         let i = i as usize;
         let Some((d, w)) = band.read(img, &nf, i) else {
             continue;
         };
-        let p = img.rays[i];
-        let along = fast_atan2(
-            f2[0] * p[0] + f2[1] * p[1] + f2[2] * p[2],
-            f1[0] * p[0] + f1[1] * p[1] + f1[2] * p[2],
-        );
-        sections.add(along, d, w);
+        let s = match along {
+            Some(a) => a[k],
+            None => {
+                let p = img.rays[i];
+                fast_atan2(
+                    f2[0] * p[0] + f2[1] * p[1] + f2[2] * p[2],
+                    f1[0] * p[0] + f1[1] * p[1] + f1[2] * p[2],
+                )
+            }
+        };
+        sections.add(s, d, w);
     }
     let fit = sections
         .mass_fit()
@@ -726,17 +758,34 @@ fn plateau_cap(values: &[u8], candidates: &[u32], background: u8, fraction: f64)
     cap.round().clamp(background as f64 + 1.0, 255.0) as u8
 }
 
-/// Keeps in `candidates` only the pixels on stretches of the great circle of `n` whose
-/// whole cross-section (see [`RefitImage::full_sections`]) lies inside the mask. A stretch
-/// is found from s = atan2(f2·p, f1·p) in the circle's own frame, which is the same for a
-/// pixel and its mirror image across the circle, so a stretch is kept or dropped whole.
+/// Each candidate's angle along the great circle of `n`, atan2(f2·p, f1·p) in the circle's
+/// own frame (the frame [`Sections::new`] gives the same normal), into `along`.
+fn angles_along(img: &RefitImage, n: &Vector3<f64>, cands: &mut Candidates) {
+    let f1 = any_perpendicular(n);
+    let f2 = n.cross(&f1);
+    let (f1, f2) = (to_f32(&f1), to_f32(&f2));
+    cands.along.clear();
+    cands.along.extend(cands.index.iter().map(|&i| {
+        let p = img.rays[i as usize];
+        fast_atan2(
+            f2[0] * p[0] + f2[1] * p[1] + f2[2] * p[2],
+            f1[0] * p[0] + f1[1] * p[1] + f1[2] * p[2],
+        )
+    }));
+}
+
+/// Keeps among the candidates (whose angles along the great circle of `n` are in `along`)
+/// only the pixels on stretches of the circle whose whole cross-section (see
+/// [`RefitImage::full_sections`]) lies inside the mask. The angle along the circle is the
+/// same for a pixel and its mirror image across the circle, so a stretch is kept or dropped
+/// whole.
 fn keep_full_sections(
     img: &RefitImage,
     n: &Vector3<f64>,
     foot_band: f64,
     margin: f64,
     vp: Option<&Vector3<f64>>,
-    candidates: &mut Vec<u32>,
+    cands: &mut Candidates,
 ) {
     let f1 = any_perpendicular(n);
     let f2 = n.cross(&f1);
@@ -745,19 +794,18 @@ fn keep_full_sections(
     if sections.iter().all(|&k| k) {
         return;
     }
-    let (f1f, f2f) = (
-        [f1.x as f32, f1.y as f32, f1.z as f32],
-        [f2.x as f32, f2.y as f32, f2.z as f32],
-    );
     let ks = SECTION_SAMPLES as f32 / std::f32::consts::TAU;
-    candidates.retain(|&i| {
-        let p = img.rays[i as usize];
-        let a = fast_atan2(
-            f2f[0] * p[0] + f2f[1] * p[1] + f2f[2] * p[2],
-            f1f[0] * p[0] + f1f[1] * p[1] + f1f[2] * p[2],
-        );
-        sections[((a * ks + 0.5) as i32).rem_euclid(SECTION_SAMPLES as i32) as usize]
-    });
+    let mut kept = 0;
+    for k in 0..cands.index.len() {
+        let a = cands.along[k];
+        if sections[((a * ks + 0.5) as i32).rem_euclid(SECTION_SAMPLES as i32) as usize] {
+            cands.index[kept] = cands.index[k];
+            cands.along[kept] = a;
+            kept += 1;
+        }
+    }
+    cands.index.truncate(kept);
+    cands.along.truncate(kept);
 }
 
 /// Writes into `out` the pixels above the background within the band of `n`: half-width
@@ -913,7 +961,7 @@ mod tests {
             support: 100,
             width_rad: 0.0,
         }];
-        let mut cand = Vec::new();
+        let mut cand = Candidates::default();
         // The row's edges here are one pixel sharp (no smoothing), where clipping the
         // plateau would cut into them: the plain intensity centroid.
         let centroid = RefitOptions {
