@@ -7,12 +7,15 @@ fn bin() -> Command {
     Command::new(env!("CARGO_BIN_EXE_omnirow"))
 }
 
-fn write(name: &str, text: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("omnirow-cfgtest-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+#[path = "support/scratch.rs"]
+mod scratch;
+
+/// Writes `text` to `name` in a scratch directory of its own (removed when the test passes).
+fn write(name: &str, text: &str) -> (scratch::Scratch, PathBuf) {
+    let dir = scratch::Scratch::new("cfgtest", name);
     let p = dir.join(name);
     std::fs::write(&p, text).unwrap();
-    p
+    (dir, p)
 }
 
 /// Runs `config check` and returns (success, stderr).
@@ -41,7 +44,7 @@ fn shipped_config_passes() {
 
 #[test]
 fn unknown_key_is_named_with_its_line() {
-    let p = write(
+    let (_dir, p) = write(
         "unknown.toml",
         "[pipeline]\nframe_queue = 2\n\n[http]\nlisten = \"127.0.0.1:1\"\nlistne = 3\n",
     );
@@ -55,7 +58,7 @@ fn unknown_key_is_named_with_its_line() {
 
 #[test]
 fn wrong_type_is_named_with_its_line() {
-    let p = write("type.toml", "# comment\n[record]\nenabled = \"yes\"\n");
+    let (_dir, p) = write("type.toml", "# comment\n[record]\nenabled = \"yes\"\n");
     let (ok, err) = check(&p);
     assert!(!ok);
     assert!(
@@ -66,7 +69,7 @@ fn wrong_type_is_named_with_its_line() {
 
 #[test]
 fn impossible_values_are_named_with_their_lines() {
-    let p = write(
+    let (_dir, p) = write(
         "values.toml",
         "[pipeline]\nframe_queue = 0\n[source]\nkind = \"replay\"\n[source.replay]\nspeed = -1.0\n",
     );
