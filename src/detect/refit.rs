@@ -558,6 +558,29 @@ impl Band {
     }
 }
 
+impl Band {
+    /// The candidates inside the band of `n`: (position in `candidates`, pixel index, signed
+    /// offset, weight), as [`Band::read`] gives them.
+    fn pixels<'a>(
+        &'a self,
+        img: &'a RefitImage,
+        candidates: &'a [u32],
+        n: &Vector3<f64>,
+    ) -> impl Iterator<Item = (usize, usize, f32, f64)> + 'a {
+        let nf = to_f32(n);
+        candidates.iter().enumerate().filter_map(move |(k, &i)| {
+            let i = i as usize;
+            self.read(img, &nf, i).map(|(d, w)| (k, i, d, w))
+        })
+    }
+}
+
+/// Pixel `i`'s ray in double precision.
+fn ray64(img: &RefitImage, i: usize) -> Vector3<f64> {
+    let p = img.rays[i];
+    Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64)
+}
+
 fn to_f32(v: &Vector3<f64>) -> [f32; 3] {
     [v.x as f32, v.y as f32, v.z as f32]
 }
@@ -574,16 +597,10 @@ fn perspective_step(
 ) -> Option<Vector3<f64>> {
     let e2 = (v - n * n.dot(v)).normalize();
     let e1 = n.cross(&e2);
-    let nf = to_f32(n);
     let mut ata = nalgebra::Matrix3::<f64>::zeros();
     let mut atb = Vector3::<f64>::zeros();
-    for &i in candidates {
-        let i = i as usize;
-        let Some((_, w)) = band.read(img, &nf, i) else {
-            continue;
-        };
-        let p = img.rays[i];
-        let pv = Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+    for (_, i, _, w) in band.pixels(img, candidates, n) {
+        let pv = ray64(img, i);
         let g = e1.dot(&pv);
         let phi = Vector3::new(g, e2.dot(&pv), -g * g * g);
         ata += w * phi * phi.transpose();
@@ -612,15 +629,10 @@ fn section_step(
     opts: &RefitOptions,
     vp: Option<&Vector3<f64>>,
 ) -> SectionStep {
-    let nf = to_f32(n);
     let mut sections = Sections::new(n, opts.section_bins);
     let (f1, f2) = sections.frame();
     let (f1, f2) = (to_f32(&f1), to_f32(&f2));
-    for (k, &i) in candidates.iter().enumerate() {
-        let i = i as usize;
-        let Some((d, w)) = band.read(img, &nf, i) else {
-            continue;
-        };
+    for (k, i, d, w) in band.pixels(img, candidates, n) {
         let s = match along {
             Some(a) => a[k],
             None => {
@@ -650,16 +662,10 @@ fn pixel_fit(
     n: &Vector3<f64>,
     track: bool,
 ) -> Option<(PixelFit, nalgebra::Matrix3<f64>)> {
-    let nf = to_f32(n);
     let mut sc = Scatter::new();
     let mut noise = [0f64; 6];
-    for &i in candidates {
-        let i = i as usize;
-        let Some((d, w)) = band.read(img, &nf, i) else {
-            continue;
-        };
-        let p = img.rays[i];
-        let pv = Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+    for (_, i, d, w) in band.pixels(img, candidates, n) {
+        let pv = ray64(img, i);
         sc.add(&pv, w);
         if track && img.values[i] < band.cap {
             let k = (img.solid[i] as f64 * d.abs() as f64).powi(2);
