@@ -47,7 +47,9 @@ fuzz_target!(|data: &[u8]| {
         .is_some_and(|(w, h)| w <= MAX_SIDE && h <= MAX_SIDE);
     if small {
         std::fs::write(&path, data).expect("temporary file");
-        if let Ok(img) = omnirow::cli::detect::decode(&path) {
+        let decoded = omnirow::cli::detect::decode(&path);
+        let _ = std::fs::remove_file(&path);
+        if let Ok(img) = decoded {
             detect(img.width, img.height, img.format, &img.data);
         }
         return;

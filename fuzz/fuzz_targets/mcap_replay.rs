@@ -10,12 +10,23 @@ use omnirow::source::mcap_replay::{McapReplay, McapReplayOptions};
 use omnirow::source::{Poll, Rate, Source};
 use std::time::Duration;
 
+/// Removes the input's temporary file however the replay ends (a crash keeps it: libFuzzer
+/// writes its own artefact).
+struct RemoveOnDrop<'a>(&'a std::path::Path);
+
+impl Drop for RemoveOnDrop<'_> {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(self.0);
+    }
+}
+
 fuzz_target!(|data: &[u8]| {
     if let Ok(mut r) = Salvage::new(std::io::Cursor::new(data)) {
         while let Ok(Some(_)) = r.next_event() {}
     }
     let path = std::env::temp_dir().join(format!("omnirow-fuzz-{}.mcap", std::process::id()));
     std::fs::write(&path, data).expect("temporary file");
+    let _remove = RemoveOnDrop(&path);
     let Ok(mut src) = McapReplay::open(McapReplayOptions {
         path: path.clone(),
         rate: Rate::Max,
