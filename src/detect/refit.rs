@@ -12,7 +12,7 @@ use super::hough::fast_atan2;
 use super::sections::{NearField, Sections};
 use super::{DetectError, Row};
 use crate::camera::OcamModel;
-use crate::sphere::{any_perpendicular, canonical, Scatter};
+use crate::sphere::{any_perpendicular, canonical, Fit, Scatter};
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
@@ -508,14 +508,18 @@ fn refit_row(
             }
         }
         match pixel_fit(img, &band, candidates, &n, track) {
-            Some((f, noise)) if f.degeneracy < 0.5 => {
-                n = f.normal;
+            Some(PixelFit {
+                fit,
+                scatter,
+                noise,
+            }) if fit.degeneracy < 0.5 => {
+                n = fit.normal;
                 ok = true;
                 // a foot belongs to the normal it was found with
                 out.foot = None;
                 if let Some(v) = vp {
-                    let lambda = f.mean_sq_residual * f.weight;
-                    out.along_var = along_variance(&n, v, &f.matrix, lambda, &noise);
+                    let lambda = fit.mean_sq_residual * fit.weight;
+                    out.along_var = along_variance(&n, v, &scatter, lambda, &noise);
                 }
             }
             _ => break,
@@ -635,13 +639,7 @@ fn section_step(
     for (k, i, d, w) in band.pixels(img, candidates, n) {
         let s = match along {
             Some(a) => a[k],
-            None => {
-                let p = img.rays[i];
-                fast_atan2(
-                    f2[0] * p[0] + f2[1] * p[1] + f2[2] * p[2],
-                    f1[0] * p[0] + f1[1] * p[1] + f1[2] * p[2],
-                )
-            }
+            None => angle_along(&f1, &f2, img.rays[i]),
         };
         sections.add(s, d, w);
     }
@@ -661,7 +659,7 @@ fn pixel_fit(
     candidates: &[u32],
     n: &Vector3<f64>,
     track: bool,
-) -> Option<(PixelFit, nalgebra::Matrix3<f64>)> {
+) -> Option<PixelFit> {
     let mut sc = Scatter::new();
     let mut noise = [0f64; 6];
     for (_, i, d, w) in band.pixels(img, candidates, n) {
@@ -678,29 +676,21 @@ fn pixel_fit(
             noise[5] += k * z * z;
         }
     }
-    let f = sc.fit()?;
-    let noise = nalgebra::Matrix3::new(
-        noise[0], noise[1], noise[2], noise[1], noise[3], noise[4], noise[2], noise[4], noise[5],
-    );
-    Some((
-        PixelFit {
-            normal: f.normal,
-            degeneracy: f.degeneracy,
-            mean_sq_residual: f.mean_sq_residual,
-            weight: f.weight,
-            matrix: sc.matrix(),
-        },
-        noise,
-    ))
+    Some(PixelFit {
+        fit: sc.fit()?,
+        scatter: sc.matrix(),
+        noise: nalgebra::Matrix3::new(
+            noise[0], noise[1], noise[2], noise[1], noise[3], noise[4], noise[2], noise[4],
+            noise[5],
+        ),
+    })
 }
 
-/// [`pixel_fit`]'s circle with its scatter matrix.
+/// [`pixel_fit`]'s circle with its scatter matrix and the noise matrix.
 struct PixelFit {
-    normal: Vector3<f64>,
-    degeneracy: f64,
-    mean_sq_residual: f64,
-    weight: f64,
-    matrix: nalgebra::Matrix3<f64>,
+    fit: Fit,
+    scatter: nalgebra::Matrix3<f64>,
+    noise: nalgebra::Matrix3<f64>,
 }
 
 /// The variance (up to the image's noise variance per unit value) of the component along
@@ -771,13 +761,21 @@ fn angles_along(img: &RefitImage, n: &Vector3<f64>, cands: &mut Candidates) {
     let f2 = n.cross(&f1);
     let (f1, f2) = (to_f32(&f1), to_f32(&f2));
     cands.along.clear();
-    cands.along.extend(cands.index.iter().map(|&i| {
-        let p = img.rays[i as usize];
-        fast_atan2(
-            f2[0] * p[0] + f2[1] * p[1] + f2[2] * p[2],
-            f1[0] * p[0] + f1[1] * p[1] + f1[2] * p[2],
-        )
-    }));
+    cands.along.extend(
+        cands
+            .index
+            .iter()
+            .map(|&i| angle_along(&f1, &f2, img.rays[i as usize])),
+    );
+}
+
+/// The angle of ray `p` along a great circle whose frame is (f1, f2): atan2(f2·p, f1·p).
+#[inline]
+fn angle_along(f1: &[f32; 3], f2: &[f32; 3], p: [f32; 3]) -> f32 {
+    fast_atan2(
+        f2[0] * p[0] + f2[1] * p[1] + f2[2] * p[2],
+        f1[0] * p[0] + f1[1] * p[1] + f1[2] * p[2],
+    )
 }
 
 /// Keeps among the candidates (whose angles along the great circle of `n` are in `along`)
@@ -828,8 +826,8 @@ fn collect_candidates(
     out.clear();
     let background = img.background;
     let t = img.tiles;
-    let nf = [n.x as f32, n.y as f32, n.z as f32];
-    let vf = vp.map_or([0f32; 3], |v| [v.x as f32, v.y as f32, v.z as f32]);
+    let nf = to_f32(n);
+    let vf = vp.map_or([0f32; 3], to_f32);
     let s_band = (foot_band + margin).min(1.5).sin() as f32;
     let (s_foot, s_margin) = (foot_band.min(1.5).sin() as f32, margin.sin() as f32);
     let (foot, margin) = (foot_band as f32, margin as f32);
