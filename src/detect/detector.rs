@@ -404,6 +404,10 @@ impl Preparer {
     }
 }
 
+/// The edge rows turned by a bend are kept when this many times more of their support
+/// passes through their vanishing point than the chords' did.
+const BEND_GAIN: f64 = 1.25;
+
 /// Stage 3: rows → vanishing point → heading, tilt and quality, into a [`Detection`].
 #[derive(Debug, Clone)]
 pub struct VanishingStage {
@@ -508,6 +512,12 @@ pub struct Detector {
     /// again whenever the preparer's setup is rebuilt).
     edge: Option<EdgeDetector>,
     edge_rows: Vec<Row>,
+    /// The edge method's chords turned to their tangents on a curved field.
+    bend: super::chords::ChordBend,
+    last_bend: Option<super::chords::Bend>,
+    /// The edge rows before the bend, and a detection to vote on them.
+    chord_rows: Vec<Row>,
+    bend_probe: Detection,
     weights: Vec<f64>,
     precision_weights: Vec<f64>,
     precision_scratch: Vec<(f64, f64)>,
@@ -582,6 +592,10 @@ impl Detector {
             opts,
             edge: None,
             edge_rows: Vec::with_capacity(64),
+            bend: Default::default(),
+            last_bend: None,
+            chord_rows: Vec::with_capacity(64),
+            bend_probe: Detection::default(),
             weights: Vec::with_capacity(128),
             precision_weights: Vec::with_capacity(128),
             precision_scratch: Vec::with_capacity(128),
@@ -745,6 +759,9 @@ impl Detector {
             if method != Method::Hough {
                 self.run_edge()?;
             }
+            if method == Method::Edge {
+                self.bend_edge_rows()?;
+            }
         }
         let t3 = Instant::now();
         // Eq. 5: edge rows weigh w·support, Hough rows (1−w)·support. A single method's
@@ -835,6 +852,67 @@ impl Detector {
                 r.normal = crate::sphere::canonical(&n);
             }
         }
+    }
+
+    /// The edge method alone on a curved field ([`super::chords`]): its rows, chords on one
+    /// side of the robot, turned to their tangents beside it before the vote (with the
+    /// refit's near-field fit, `refit.near_reach_m` > 0, and its `near_min_sigma`). Kept
+    /// only when the turned rows agree on their vanishing point better than the chords did:
+    /// a tilted robot on a straight field also makes the chords' headings, projected on the
+    /// nominal ground, change with the distance ahead, but their great circles still meet.
+    fn bend_edge_rows(&mut self) -> Result<(), DetectError> {
+        self.last_bend = None;
+        let (Some(edge), true) = (self.edge.as_ref(), self.opts.refit.near_reach_m > 0.0) else {
+            return Ok(());
+        };
+        self.chord_rows.clear();
+        self.chord_rows.extend_from_slice(&self.edge_rows);
+        let Some(bend) = self.bend.turn(
+            &mut self.edge_rows,
+            edge.sections(),
+            edge.assignment(),
+            &edge.chains().rays,
+            &self.prep.calibration().mounting.robot_from_camera(),
+            self.opts.refit.near_min_sigma,
+        ) else {
+            return Ok(());
+        };
+        let chords = self.agreement(true)?;
+        let turned = self.agreement(false)?;
+        if turned > BEND_GAIN * chords {
+            self.last_bend = Some(bend);
+        } else {
+            self.edge_rows.clear();
+            self.edge_rows.extend_from_slice(&self.chord_rows);
+        }
+        Ok(())
+    }
+
+    /// The share of the edge rows' support (the chords before the bend, or the turned rows)
+    /// that passes through their vanishing point.
+    fn agreement(&mut self, chords: bool) -> Result<f64, DetectError> {
+        let probe = &mut self.bend_probe;
+        probe.rows.clear();
+        probe.rows.extend_from_slice(if chords {
+            &self.chord_rows
+        } else {
+            &self.edge_rows
+        });
+        self.vanish.run(None, probe)?;
+        let total: f64 = probe.rows.iter().map(|r| r.support as f64).sum();
+        let inside: f64 = probe
+            .rows
+            .iter()
+            .zip(self.vanish.inliers())
+            .filter(|(_, &i)| i)
+            .map(|(r, _)| r.support as f64)
+            .sum();
+        Ok(if total > 0.0 { inside / total } else { 0.0 })
+    }
+
+    /// The bend the edge method found in its rows on the last image, when it turned them.
+    pub fn last_bend(&self) -> Option<super::chords::Bend> {
+        self.last_bend
     }
 
     /// The edge method's centre lines, each the bisector of two boundaries, refitted on the

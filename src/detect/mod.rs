@@ -5,6 +5,7 @@
 //! [`Detector`] owns their buffers and runs them in order (prepare → Hough → vanishing point).
 
 pub mod centre;
+pub mod chords;
 pub mod comb;
 pub mod combine;
 pub mod detector;
