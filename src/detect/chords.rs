@@ -105,7 +105,12 @@ const MAX_CURVATURE: f64 = 0.25;
 pub struct ChordBend {
     chords: Vec<Chord>,
     residuals: Vec<f64>,
+    /// Every row's points on the ground, row after row, and each row's range of them.
     points: Vec<Vector3<f64>>,
+    spans: Vec<std::ops::Range<usize>>,
+    /// The sections ordered by their row (counting sort), and where each row's begin.
+    order: Vec<u32>,
+    firsts: Vec<usize>,
 }
 
 impl ChordBend {
@@ -122,10 +127,11 @@ impl ChordBend {
         robot_from_camera: &Rotation3<f64>,
         min_sigma: f64,
     ) -> Option<Bend> {
+        self.group_points(rows.len(), sections, assignment, rays, robot_from_camera);
         self.chords.clear();
         for (k, row) in rows.iter().enumerate() {
-            self.ground_points(k, sections, assignment, rays, robot_from_camera);
-            if let Some(c) = chord(k, row, &self.points, robot_from_camera) {
+            let points = &self.points[self.spans[k].clone()];
+            if let Some(c) = chord(k, row, points, robot_from_camera) {
                 self.chords.push(c);
             }
         }
@@ -133,44 +139,69 @@ impl ChordBend {
         if bend.sigma.is_nan() || bend.sigma.abs() < min_sigma {
             return None;
         }
-        for i in 0..self.chords.len() {
-            let c = self.chords[i];
+        for c in &self.chords {
             // a chord off the line is no row boundary (or not one of these rows): as it is
-            if bend.residual(&c).abs() >= bend.scale {
+            if bend.residual(c).abs() >= bend.scale {
                 continue;
             }
-            self.ground_points(c.row, sections, assignment, rays, robot_from_camera);
-            let (_, _, k) = bend.row_of(&c);
-            if let Some(n) = tangent(bend.heading, k, &self.points, robot_from_camera) {
+            let (_, _, k) = bend.row_of(c);
+            let points = &self.points[self.spans[c.row].clone()];
+            if let Some(n) = tangent(bend.heading, k, points, robot_from_camera) {
                 rows[c.row].normal = n;
             }
         }
         Some(bend)
     }
 
-    /// The points of row `k` on the ground, robot frame, camera heights (z = −1): its
-    /// sections' rays below the horizon.
-    fn ground_points(
+    /// The points of each of the `rows` on the ground, robot frame, camera heights (z = −1):
+    /// its sections' rays below the horizon, into `self.points`, row after row (each row's
+    /// sections in their order), and each row's range of them into `self.spans`.
+    fn group_points(
         &mut self,
-        k: usize,
+        rows: usize,
         sections: &[Section],
         assignment: &[u32],
         rays: &[Vector3<f64>],
         robot_from_camera: &Rotation3<f64>,
     ) {
-        self.points.clear();
-        for (s, &a) in sections.iter().zip(assignment) {
-            if a == merge::NONE || a as usize != k {
-                continue;
-            }
-            let span = rays.get(s.start as usize..s.end as usize).unwrap_or(&[]);
-            for x in span {
-                let r = robot_from_camera * x;
-                if r.z < -0.05 {
-                    self.points.push(r / -r.z);
-                }
+        let row_of = |a: u32| (a != merge::NONE && (a as usize) < rows).then_some(a as usize);
+        self.firsts.clear();
+        self.firsts.resize(rows + 1, 0);
+        for &a in assignment.iter().take(sections.len()) {
+            if let Some(k) = row_of(a) {
+                self.firsts[k + 1] += 1;
             }
         }
+        for k in 0..rows {
+            self.firsts[k + 1] += self.firsts[k];
+        }
+        self.order.clear();
+        self.order.resize(self.firsts[rows], 0);
+        // the spans first serve as each row's cursor into `order`
+        let mut next = std::mem::take(&mut self.spans);
+        next.clear();
+        next.extend((0..rows).map(|k| self.firsts[k]..self.firsts[k]));
+        for (i, &a) in assignment.iter().take(sections.len()).enumerate() {
+            if let Some(k) = row_of(a) {
+                self.order[next[k].end] = i as u32;
+                next[k].end += 1;
+            }
+        }
+        self.points.clear();
+        for (k, span) in next.iter_mut().enumerate() {
+            let start = self.points.len();
+            for &i in &self.order[self.firsts[k]..self.firsts[k + 1]] {
+                let s = &sections[i as usize];
+                for x in rays.get(s.start as usize..s.end as usize).unwrap_or(&[]) {
+                    let r = robot_from_camera * x;
+                    if r.z < -0.05 {
+                        self.points.push(r / -r.z);
+                    }
+                }
+            }
+            *span = start..self.points.len();
+        }
+        self.spans = next;
     }
 
     /// The bend through the chords (each turned by atan(k·ā) from the heading h, k the
