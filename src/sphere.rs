@@ -69,6 +69,23 @@ impl Scatter {
         self.count += 1;
     }
 
+    /// Adds a unit vector with a weight when `keep`, without a branch: otherwise its terms
+    /// are exact zeros, so the sums are those of [`Self::add`] on the kept vectors alone.
+    #[inline]
+    pub fn add_if(&mut self, p: &Vector3<f64>, w: f64, keep: bool) {
+        let w = if keep { w } else { 0.0 };
+        let (x, y, z) = (p.x, p.y, p.z);
+        let m = &mut self.m;
+        m[(0, 0)] += w * x * x;
+        m[(0, 1)] += w * x * y;
+        m[(0, 2)] += w * x * z;
+        m[(1, 1)] += w * y * y;
+        m[(1, 2)] += w * y * z;
+        m[(2, 2)] += w * z * z;
+        self.weight += w;
+        self.count += keep as usize;
+    }
+
     /// Adds another accumulator.
     pub fn merge(&mut self, other: &Scatter) {
         self.m += other.m;
@@ -209,6 +226,22 @@ mod tests {
 
     fn unit(a: f64, b: f64) -> Vector3<f64> {
         from_phi_theta(a, b)
+    }
+
+    #[test]
+    fn add_if_sums_as_add_on_the_kept_vectors() {
+        let (mut a, mut b) = (Scatter::new(), Scatter::new());
+        for i in 0..50 {
+            let p = unit(0.1 * i as f64, 0.37 * i as f64);
+            let w = 0.5 + (i % 7) as f64;
+            let keep = i % 3 != 0;
+            a.add_if(&p, w, keep);
+            if keep {
+                b.add(&p, w);
+            }
+        }
+        assert_eq!(a.matrix(), b.matrix());
+        assert_eq!((a.weight(), a.count()), (b.weight(), b.count()));
     }
 
     proptest! {

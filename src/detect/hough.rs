@@ -207,25 +207,11 @@ struct Window {
     sin_peak: f64,
 }
 
-/// atan2 for f32 with an error below 1e-5 rad (enough to pick a 2° cell), branch-light.
+/// atan2 for f32 with an error below 1e-5 rad (enough to pick a 2° cell), branch-free so
+/// that loops over it vectorise (and random signs cost no mispredicted branches).
 #[inline]
 pub fn fast_atan2(y: f32, x: f32) -> f32 {
-    let ax = x.abs();
-    let ay = y.abs();
-    let (mn, mx) = if ax < ay { (ax, ay) } else { (ay, ax) };
-    let a = if mx > 0.0 { mn / mx } else { 0.0 };
-    let s = a * a;
-    let mut r = ((((-0.013_480_47 * s + 0.057_477_314) * s - 0.121_239_07) * s + 0.195_635_93) * s
-        - 0.332_994_96)
-        * s
-        * a
-        + a;
-    if ay > ax {
-        r = std::f32::consts::FRAC_PI_2 - r;
-    }
-    if x < 0.0 {
-        r = PI32 - r;
-    }
+    let r = atan2_upper(y.abs(), x);
     if y < 0.0 {
         -r
     } else {
@@ -257,6 +243,18 @@ fn atan2_upper(y: f32, x: f32) -> f32 {
     } else {
         r
     }
+}
+
+/// ⌊v⌋ for v in [0, 2²²) (NaN or larger values give some value in that range's images),
+/// by the float's own rounding: adding 2²³ leaves the integer nearest to v in the
+/// mantissa's low bits, and one less when that rounded up. Unlike `as i32`, whose
+/// saturation keeps the conversion scalar, this vectorises with the loop around it.
+#[inline(always)]
+fn floor_small(v: f32) -> i32 {
+    const MAGIC: f32 = 8_388_608.0;
+    let t = v + MAGIC;
+    let nearest = (t.to_bits() as i32).wrapping_sub(MAGIC.to_bits() as i32);
+    nearest - ((t - MAGIC > v) as i32)
 }
 
 impl HoughRows {
@@ -451,7 +449,7 @@ impl HoughRows {
             .zip(&self.cos_e[from..=to])
             .zip(&self.sin_e[from..=to])
         {
-            *e = (atan2_upper(y, px * c + py * s) * scale).min(pmax) as i32;
+            *e = floor_small((atan2_upper(y, px * c + py * s) * scale).min(pmax));
         }
         for (col, e) in self.diff[from * stride..to * stride]
             .chunks_exact_mut(stride)
@@ -555,15 +553,18 @@ impl HoughRows {
         let min_tol = self.opts.min_tolerance_deg().to_radians();
         // Points within twice the first band: later bands are narrower and the normal moves
         // little, so they never need points outside this set.
-        let wide = (2.0 * tol).sin();
-        self.sel.clear();
+        let wide = (2.0 * tol).sin() as f32;
+        // Compacted without branches (every ray is written, the end moves past the ones
+        // kept): whether a ray is in varies from ray to ray, so a branch would mispredict.
+        if self.sel.len() < rays.len() {
+            self.sel.resize(rays.len(), ([0.0; 3], 0.0));
+        }
+        let mut len = 0;
         let nf = [n0.x as f32, n0.y as f32, n0.z as f32];
         for (r, &w) in rays.iter().zip(weights) {
             let d = nf[0] * r[0] + nf[1] * r[1] + nf[2] * r[2];
-            if d.abs() < wide as f32 {
-                self.sel
-                    .push(([r[0] as f64, r[1] as f64, r[2] as f64], w as f64));
-            }
+            self.sel[len] = ([r[0] as f64, r[1] as f64, r[2] as f64], w as f64);
+            len += (d.abs() < wide) as usize;
         }
         let mut n = n0;
         let mut support = 0u32;
@@ -577,20 +578,17 @@ impl HoughRows {
             let mut sc = Scatter::new();
             support = 0;
             let mut kept = 0;
-            for i in 0..self.sel.len() {
+            for i in 0..len {
                 let (r, w) = self.sel[i];
                 let pv = Vector3::from(r);
                 let d = n.dot(&pv).abs();
-                if d < s_tol {
-                    sc.add(&pv, w);
-                    support += 1;
-                }
-                if d < s_keep {
-                    self.sel[kept] = (r, w);
-                    kept += 1;
-                }
+                let inside = d < s_tol;
+                sc.add_if(&pv, w, inside);
+                support += inside as u32;
+                self.sel[kept] = (r, w);
+                kept += (d < s_keep) as usize;
             }
-            self.sel.truncate(kept);
+            len = kept;
             let f = sc.fit()?;
             let change = axis_angle(&f.normal, &n);
             n = f.normal;
@@ -674,18 +672,15 @@ impl HoughRows {
             let mut own = 0u32;
             let mut all = 0u32;
             for (r, &o) in rays.iter().zip(&self.owned) {
-                if (nf[0] * r[0] + nf[1] * r[1] + nf[2] * r[2]).abs() < s_tol {
-                    all += 1;
-                    own += (!o) as u32;
-                }
+                let inside = ((nf[0] * r[0] + nf[1] * r[1] + nf[2] * r[2]).abs() < s_tol) as u32;
+                all += inside;
+                own += inside & !o as u32;
             }
             if own < self.opts.min_support || (own as f64) < 0.5 * all as f64 {
                 continue;
             }
             for (r, o) in rays.iter().zip(self.owned.iter_mut()) {
-                if (nf[0] * r[0] + nf[1] * r[1] + nf[2] * r[2]).abs() < s_tol {
-                    *o = true;
-                }
+                *o |= (nf[0] * r[0] + nf[1] * r[1] + nf[2] * r[2]).abs() < s_tol;
             }
             rows.push(row);
             self.bands.push(tol);
@@ -752,6 +747,27 @@ pub(crate) mod tests {
         }
         assert!(worst < 2e-5, "{worst}");
         assert_eq!(fast_atan2(0.0, 0.0), 0.0);
+        // The sign of a zero y: (−0, −1) is +π, as the branching form gave.
+        assert_eq!(fast_atan2(-0.0, -1.0), PI32);
+        assert_eq!(fast_atan2(-1e-30, -1.0), -PI32);
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn floor_small_is_floor(v in 0.0f32..4_194_303.0) {
+            proptest::prop_assert_eq!(floor_small(v), v.floor() as i32);
+        }
+    }
+
+    #[test]
+    fn floor_small_at_integers_and_just_below_them() {
+        for k in [0i32, 1, 2, 89, 90, 179, 4_194_303] {
+            assert_eq!(floor_small(k as f32), k);
+            if k > 0 {
+                let below = f32::from_bits((k as f32).to_bits() - 1);
+                assert_eq!(floor_small(below), k - 1, "{below}");
+            }
+        }
     }
 
     /// Rows through one vanishing point `vp` at angles `at` around it (`per_row` rays each, in
