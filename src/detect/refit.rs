@@ -165,6 +165,8 @@ pub struct NearFoot {
 pub struct Candidates {
     index: Vec<u32>,
     along: Vec<f32>,
+    /// The candidates' rays, gathered while they are collected.
+    rays: Vec<[f32; 3]>,
 }
 
 impl Candidates {
@@ -172,6 +174,7 @@ impl Candidates {
         Candidates {
             index: Vec::with_capacity(pixels),
             along: Vec::with_capacity(pixels),
+            rays: Vec::with_capacity(pixels),
         }
     }
 }
@@ -449,20 +452,18 @@ fn refit_row(
     let wedge = vp.filter(|_| opts.wedge);
     let mut n = *start;
     let mut out = RowFit::default();
+    // The angles along the start's circle serve the full sections and the first
+    // cross-section fit (whose frame is the start's).
+    let mut along_valid = opts.sections || opts.full_sections;
     collect_candidates(
         img,
         &n,
         foot_band + slack,
         margin + slack,
         wedge,
-        &mut cands.index,
+        along_valid,
+        cands,
     );
-    // The angles along the start's circle serve the full sections and the first
-    // cross-section fit (whose frame is the start's).
-    let mut along_valid = opts.sections || opts.full_sections;
-    if along_valid {
-        angles_along(img, &n, cands);
-    }
     if opts.full_sections {
         // Decided once per row: between iterations the circle moves by a fraction of a
         // pixel, which leaves the stretches where its cross-section is whole unchanged.
@@ -754,21 +755,6 @@ fn plateau_cap(values: &[u8], candidates: &[u32], background: u8, fraction: f64)
     cap.round().clamp(background as f64 + 1.0, 255.0) as u8
 }
 
-/// Each candidate's angle along the great circle of `n`, atan2(f2·p, f1·p) in the circle's
-/// own frame (the frame [`Sections::new`] gives the same normal), into `along`.
-fn angles_along(img: &RefitImage, n: &Vector3<f64>, cands: &mut Candidates) {
-    let f1 = any_perpendicular(n);
-    let f2 = n.cross(&f1);
-    let (f1, f2) = (to_f32(&f1), to_f32(&f2));
-    cands.along.clear();
-    cands.along.extend(
-        cands
-            .index
-            .iter()
-            .map(|&i| angle_along(&f1, &f2, img.rays[i as usize])),
-    );
-}
-
 /// The angle of ray `p` along a great circle whose frame is (f1, f2): atan2(f2·p, f1·p).
 #[inline]
 fn angle_along(f1: &[f32; 3], f2: &[f32; 3], p: [f32; 3]) -> f32 {
@@ -812,18 +798,27 @@ fn keep_full_sections(
     cands.along.truncate(kept);
 }
 
-/// Writes into `out` the pixels above the background within the band of `n`: half-width
+/// Writes into `cands` the pixels above the background within the band of `n`: half-width
 /// `foot_band` + `margin`, or with a vanishing point `vp` the wedge `foot_band`·sin(angle
-/// from `vp`) + `margin`. Tiles whose cone of rays misses the band are skipped whole.
+/// from `vp`) + `margin`; with `along`, also their angles along the great circle of `n`
+/// (in the frame `any_perpendicular(n)`, `n` × it), read while their rays are at hand.
+/// Tiles whose cone of rays misses the band are skipped whole.
+#[allow(clippy::too_many_arguments)]
 fn collect_candidates(
     img: &RefitImage,
     n: &Vector3<f64>,
     foot_band: f64,
     margin: f64,
     vp: Option<&Vector3<f64>>,
-    out: &mut Vec<u32>,
+    along: bool,
+    cands: &mut Candidates,
 ) {
-    out.clear();
+    cands.index.clear();
+    cands.along.clear();
+    cands.rays.clear();
+    let wedge = vp.is_some();
+    let f1 = any_perpendicular(n);
+    let (f1, f2) = (to_f32(&f1), to_f32(&n.cross(&f1)));
     let background = img.background;
     let t = img.tiles;
     let nf = to_f32(n);
@@ -847,27 +842,34 @@ fn collect_candidates(
             continue;
         }
         let (r0, c0) = (tile.r0 as usize, tile.c0 as usize);
+        let cols = (c0 + t.size).min(t.width) - c0;
         for r in r0..(r0 + t.size).min(t.height) {
-            let base = r * t.width;
-            for c in c0..(c0 + t.size).min(t.width) {
-                let i = base + c;
-                if img.values[i] & img.mask[i] <= background {
-                    continue;
-                }
+            let lo = r * t.width + c0;
+            // Every pixel of the tile's row is written and the end moves past the ones kept:
+            // at a plant's edge whether a pixel is in changes from pixel to pixel, and
+            // branches on it mispredicted.
+            let len = cands.index.len();
+            cands.index.resize(len + cols, 0);
+            cands.rays.resize(len + cols, [0.0; 3]);
+            let mut k = len;
+            for i in lo..lo + cols {
                 let p = img.rays[i];
+                let above = img.values[i] & img.mask[i] > background;
                 let d = (nf[0] * p[0] + nf[1] * p[1] + nf[2] * p[2]).abs();
-                if d >= s_band {
-                    continue;
-                }
-                if vp.is_some() {
-                    let a = vf[0] * p[0] + vf[1] * p[1] + vf[2] * p[2];
-                    if d >= s_foot * (1.0 - a * a).max(0.0).sqrt() + s_margin {
-                        continue;
-                    }
-                }
-                out.push(i as u32);
+                let a = vf[0] * p[0] + vf[1] * p[1] + vf[2] * p[2];
+                let in_wedge = !wedge | (d < s_foot * (1.0 - a * a).max(0.0).sqrt() + s_margin);
+                cands.index[k] = i as u32;
+                cands.rays[k] = p;
+                k += (above & (d < s_band) & in_wedge) as usize;
             }
+            cands.index.truncate(k);
+            cands.rays.truncate(k);
         }
+    }
+    if along {
+        cands
+            .along
+            .extend(cands.rays.iter().map(|&p| angle_along(&f1, &f2, p)));
     }
 }
 
