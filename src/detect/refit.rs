@@ -845,6 +845,11 @@ fn collect_candidates(
         let cols = (c0 + t.size).min(t.width) - c0;
         for r in r0..(r0 + t.size).min(t.height) {
             let lo = r * t.width + c0;
+            // A stretch of background (between plants) costs no rays' reads.
+            let (vals, mask) = (&img.values[lo..lo + cols], &img.mask[lo..lo + cols]);
+            if vals.iter().zip(mask).fold(0u8, |m, (&v, &k)| m.max(v & k)) <= background {
+                continue;
+            }
             // Every pixel of the tile's row is written and the end moves past the ones kept:
             // at a plant's edge whether a pixel is in changes from pixel to pixel, and
             // branches on it mispredicted.
