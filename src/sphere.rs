@@ -57,16 +57,7 @@ impl Scatter {
     /// Adds a unit vector with a weight.
     #[inline]
     pub fn add(&mut self, p: &Vector3<f64>, w: f64) {
-        let (x, y, z) = (p.x, p.y, p.z);
-        let m = &mut self.m;
-        m[(0, 0)] += w * x * x;
-        m[(0, 1)] += w * x * y;
-        m[(0, 2)] += w * x * z;
-        m[(1, 1)] += w * y * y;
-        m[(1, 2)] += w * y * z;
-        m[(2, 2)] += w * z * z;
-        self.weight += w;
-        self.count += 1;
+        self.add_if(p, w, true);
     }
 
     /// Adds a unit vector with a weight when `keep`, without a branch: otherwise its terms
