@@ -165,7 +165,8 @@ pub struct NearFoot {
 pub struct Candidates {
     index: Vec<u32>,
     along: Vec<f32>,
-    /// The candidates' rays, gathered while they are collected.
+    /// Scratch of the collection: the candidates' rays, gathered while they are collected
+    /// for their angles along the row (not kept in step with `index` afterwards).
     rays: Vec<[f32; 3]>,
 }
 
@@ -800,8 +801,9 @@ fn keep_full_sections(
 
 /// Writes into `cands` the pixels above the background within the band of `n`: half-width
 /// `foot_band` + `margin`, or with a vanishing point `vp` the wedge `foot_band`·sin(angle
-/// from `vp`) + `margin`; with `along`, also their angles along the great circle of `n`
-/// (in the frame `any_perpendicular(n)`, `n` × it), read while their rays are at hand.
+/// from `vp`) + `margin`; with `along`, also their angles along the great circle of `n`,
+/// atan2(f2·p, f1·p) in the circle's own frame (f1 = `any_perpendicular(n)`, f2 = n × f1,
+/// the frame [`Sections::new`] gives the same normal), taken while their rays are at hand.
 /// Tiles whose cone of rays misses the band are skipped whole.
 #[allow(clippy::too_many_arguments)]
 fn collect_candidates(
