@@ -224,6 +224,35 @@ impl OcamModel {
         Vector3::new(xp, yp, zp).normalize()
     }
 
+    /// [`OcamModel::cam2world`] of every (row, col) in `pixels`, appended to `out`: the same
+    /// rays to the bit, four pixels at a time so that their polynomials' long chains of
+    /// dependent multiply-adds overlap.
+    pub fn cam2world_many(&self, pixels: &[[f64; 2]], out: &mut Vec<Vector3<f64>>) {
+        out.reserve(pixels.len());
+        let mut quads = pixels.chunks_exact(4);
+        for q in &mut quads {
+            let mut x = [0.0; 4];
+            let mut y = [0.0; 4];
+            let mut r = [0.0; 4];
+            for l in 0..4 {
+                (x[l], y[l]) = self.undistort_affine(q[l][0], q[l][1]);
+                r[l] = (x[l] * x[l] + y[l] * y[l]).sqrt();
+            }
+            let mut z = [0.0; 4];
+            for &c in self.ss.iter().rev() {
+                for l in 0..4 {
+                    z[l] = z[l] * r[l] + c;
+                }
+            }
+            for l in 0..4 {
+                out.push(Vector3::new(x[l], y[l], z[l]).normalize());
+            }
+        }
+        for p in quads.remainder() {
+            out.push(self.cam2world(p[0], p[1]));
+        }
+    }
+
     /// The raw OCamCalib `world2cam` with the inverse polynomial as published, no validity check.
     pub fn world2cam_invpol(&self, ray: &Vector3<f64>) -> [f64; 2] {
         let norm = (ray.x * ray.x + ray.y * ray.y).sqrt();
@@ -553,6 +582,28 @@ mod tests {
     fn sample() -> OcamModel {
         let text = "#c\n\n5 -4.714441e+02 0.000000e+00 7.356108e-04 -3.773045e-07 5.800006e-10 \n\n#i\n\n10 772.405470 504.754051 7.034666 45.327180 54.651570 0.458049 -7.873745 15.588713 13.743404 2.968883 \n\n#c\n\n794.308657 798.175741\n\n#a\n\n1.000305 -0.000277 -0.000925\n\n#s\n\n1600 1600\n";
         OcamModel::parse(text, Path::new("mem")).unwrap()
+    }
+
+    proptest::proptest! {
+        /// Four pixels at a time give the rays one pixel at a time gives, to the bit (and
+        /// the remainder after the last four too).
+        #[test]
+        fn cam2world_many_is_cam2world(
+            pixels in proptest::collection::vec((-100.0f64..1700.0, -100.0f64..1700.0), 0..23),
+        ) {
+            let m = sample();
+            let pixels: Vec<[f64; 2]> = pixels.into_iter().map(|(r, c)| [r, c]).collect();
+            let mut many = vec![Vector3::zeros()];
+            m.cam2world_many(&pixels, &mut many);
+            proptest::prop_assert_eq!(many.len(), pixels.len() + 1);
+            for (p, r) in pixels.iter().zip(&many[1..]) {
+                let one = m.cam2world(p[0], p[1]);
+                proptest::prop_assert!(
+                    one.iter().zip(r.iter()).all(|(a, b)| a.to_bits() == b.to_bits()),
+                    "{p:?}: {one:?} and {r:?}"
+                );
+            }
+        }
     }
 
     #[test]

@@ -84,6 +84,8 @@ pub struct ChainTracer {
     visited: Vec<u8>,
     touched: Vec<u32>,
     half: Vec<u32>,
+    /// The kept pixels' positions in the image (`locate`'s), before they become rays.
+    located: Vec<[f64; 2]>,
 }
 
 impl ChainTracer {
@@ -101,6 +103,7 @@ impl ChainTracer {
             visited: vec![0; width * height],
             touched: Vec::new(),
             half: Vec::new(),
+            located: Vec::new(),
         })
     }
 
@@ -179,11 +182,13 @@ impl ChainTracer {
         for &i in &self.touched {
             self.visited[i as usize] = 0;
         }
-        out.rays.reserve(out.pixels.len());
-        for p in &out.pixels {
-            let q = locate(p[0] as usize, p[1] as usize);
-            out.rays.push(model.cam2world(q[0], q[1]));
-        }
+        self.located.clear();
+        self.located.extend(
+            out.pixels
+                .iter()
+                .map(|p| locate(p[0] as usize, p[1] as usize)),
+        );
+        model.cam2world_many(&self.located, &mut out.rays);
         Ok(result)
     }
 
