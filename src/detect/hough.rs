@@ -181,6 +181,8 @@ pub struct HoughRows {
     peaks: Vec<(u32, u32)>,
     /// Points near the refined peak (ray, weight), converted once.
     sel: Vec<([f64; 3], f64)>,
+    /// The refinement's first selection: indices of the points near the peak's circle.
+    sel_index: Vec<u32>,
     /// Refined candidates with the half-width (radians) of their final band.
     found: Vec<(Row, f64)>,
     /// Per point: claimed by an accepted row.
@@ -277,6 +279,7 @@ impl HoughRows {
             vote_stride: 1,
             peaks: Vec::with_capacity(t * opts.phi_bins()),
             sel: Vec::new(),
+            sel_index: Vec::new(),
             found: Vec::with_capacity(4 * opts.max_rows),
             owned: Vec::new(),
             bands: Vec::with_capacity(opts.max_rows),
@@ -556,16 +559,23 @@ impl HoughRows {
         let wide = (2.0 * tol).sin() as f32;
         // Compacted without branches (every ray is written, the end moves past the ones
         // kept): whether a ray is in varies from ray to ray, so a branch would mispredict.
-        if self.sel.len() < rays.len() {
-            self.sel.resize(rays.len(), ([0.0; 3], 0.0));
+        // The indices first (four bytes written per ray), then the few points kept widened
+        // to f64.
+        if self.sel_index.len() < rays.len() {
+            self.sel_index.resize(rays.len(), 0);
         }
         let mut len = 0;
         let nf = [n0.x as f32, n0.y as f32, n0.z as f32];
-        for (r, &w) in rays.iter().zip(weights) {
+        for (k, r) in rays.iter().enumerate() {
             let d = nf[0] * r[0] + nf[1] * r[1] + nf[2] * r[2];
-            self.sel[len] = ([r[0] as f64, r[1] as f64, r[2] as f64], w as f64);
+            self.sel_index[len] = k as u32;
             len += (d.abs() < wide) as usize;
         }
+        self.sel.clear();
+        self.sel.extend(self.sel_index[..len].iter().map(|&k| {
+            let (r, w) = (rays[k as usize], weights[k as usize]);
+            ([r[0] as f64, r[1] as f64, r[2] as f64], w as f64)
+        }));
         let mut n = n0;
         let mut support = 0u32;
         let mut fit = None;
