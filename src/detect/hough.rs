@@ -557,10 +557,9 @@ impl HoughRows {
         // Points within twice the first band: later bands are narrower and the normal moves
         // little, so they never need points outside this set.
         let wide = (2.0 * tol).sin() as f32;
-        // Compacted without branches (every ray is written, the end moves past the ones
-        // kept): whether a ray is in varies from ray to ray, so a branch would mispredict.
-        // The indices first (four bytes written per ray), then the few points kept widened
-        // to f64.
+        // The indices compacted without branches (every ray's index is written, the end
+        // moves past the ones kept: whether a ray is in varies from ray to ray, so a branch
+        // would mispredict), then only the points kept widened to f64.
         if self.sel_index.len() < rays.len() {
             self.sel_index.resize(rays.len(), 0);
         }

@@ -486,10 +486,11 @@ fn nms_hysteresis(
 ) -> usize {
     stack.clear();
     let w = width as isize;
-    for (r, &(span_lo, span_hi)) in spans.iter().enumerate().take(height - 1).skip(1) {
+    // Only the mask's columns of a row, never the border.
+    let columns = |(lo, hi): (usize, usize)| (lo.max(1), hi.min(width - 1));
+    for (r, &span) in spans.iter().enumerate().take(height - 1).skip(1) {
         let row = r * width;
-        // Only the mask's columns of this row, never the border.
-        let (lo, hi) = (span_lo.max(1), span_hi.min(width - 1));
+        let (lo, hi) = columns(span);
         if hi <= lo {
             continue;
         }
@@ -550,8 +551,8 @@ fn nms_hysteresis(
     // Weak pixels left unconnected are cleared. Only the rows' spans can hold any (the rest
     // was cleared at the start); counted per row in 32-bit lanes, which vectorise four wide.
     let mut count = 0usize;
-    for (r, &(span_lo, span_hi)) in spans.iter().enumerate().take(height - 1).skip(1) {
-        let (lo, hi) = (span_lo.max(1), span_hi.min(width - 1));
+    for (r, &span) in spans.iter().enumerate().take(height - 1).skip(1) {
+        let (lo, hi) = columns(span);
         if hi <= lo {
             continue;
         }
