@@ -158,43 +158,97 @@ pub fn vegetation_image(
         VegetationIndex::Auto => VegetationIndex::ExcessGreen,
         other => other,
     };
-    let f = index_fn(index);
-    match (view.format, factor) {
-        (PixelFormat::Mono8, 1) => out.data.copy_from_slice(d),
+    let layout = match (view.format, factor) {
+        (PixelFormat::Mono8, 1) => {
+            out.data.copy_from_slice(d);
+            None
+        }
         (PixelFormat::Mono8, _) => {
-            // Column pairs of the two rows summed first (contiguous, vectorised), then the
-            // pairs of sums, in runs that fit a stack buffer.
-            const RUN: usize = 256;
-            let mut sums = [0u16; 2 * RUN];
-            for r in 0..oh {
-                let a = &d[2 * r * w..2 * r * w + 2 * ow];
-                let b = &d[(2 * r + 1) * w..(2 * r + 1) * w + 2 * ow];
-                let o = &mut out.data[r * ow..(r + 1) * ow];
-                for ((o, a), b) in o
-                    .chunks_mut(RUN)
-                    .zip(a.chunks(2 * RUN))
-                    .zip(b.chunks(2 * RUN))
-                {
-                    let t = &mut sums[..a.len()];
-                    for ((t, &x), &y) in t.iter_mut().zip(a).zip(b) {
-                        *t = x as u16 + y as u16;
-                    }
-                    for (v, p) in o.iter_mut().zip(t.chunks_exact(2)) {
-                        *v = ((p[0] + p[1] + 2) >> 2) as u8;
-                    }
-                }
+            mono_binned(d, w, ow, oh, &mut out.data);
+            None
+        }
+        (PixelFormat::Rgb8, 1) => Some(Colour::Rgb),
+        (PixelFormat::Rgb8, _) => Some(Colour::RgbBinned),
+        (PixelFormat::BayerRggb8, _) => Some(Colour::Bayer),
+    };
+    if let Some(layout) = layout {
+        // One instance per index, so that each inner loop inlines its index rather than
+        // calling it through a pointer for every pixel.
+        let o = &mut out.data;
+        match index {
+            VegetationIndex::Luma => colour(layout, d, w, oh, o, luma),
+            VegetationIndex::ChromaticExcessGreen => colour(layout, d, w, oh, o, chroma_exg),
+            VegetationIndex::ExcessGreenMinusRed => colour(layout, d, w, oh, o, exg_exr),
+            VegetationIndex::Auto | VegetationIndex::ExcessGreen => {
+                colour(layout, d, w, oh, o, exg)
             }
         }
-        (PixelFormat::Rgb8, 1) => {
-            for (o, p) in out.data.iter_mut().zip(d.chunks_exact(3)) {
+    }
+    Ok(VegetationResult {
+        factor: factor as u32,
+        width: ow,
+        height: oh,
+    })
+}
+
+/// Mono8 input binned 2×2: column pairs of the two rows summed first (contiguous,
+/// vectorised), then the pairs of sums, in runs that fit a stack buffer.
+fn mono_binned(d: &[u8], w: usize, ow: usize, oh: usize, out: &mut [u8]) {
+    const RUN: usize = 256;
+    let mut sums = [0u16; 2 * RUN];
+    for r in 0..oh {
+        let a = &d[2 * r * w..2 * r * w + 2 * ow];
+        let b = &d[(2 * r + 1) * w..(2 * r + 1) * w + 2 * ow];
+        let o = &mut out[r * ow..(r + 1) * ow];
+        for ((o, a), b) in o
+            .chunks_mut(RUN)
+            .zip(a.chunks(2 * RUN))
+            .zip(b.chunks(2 * RUN))
+        {
+            let t = &mut sums[..a.len()];
+            for ((t, &x), &y) in t.iter_mut().zip(a).zip(b) {
+                *t = x as u16 + y as u16;
+            }
+            for (v, p) in o.iter_mut().zip(t.chunks_exact(2)) {
+                *v = ((p[0] + p[1] + 2) >> 2) as u8;
+            }
+        }
+    }
+}
+
+/// How colour input is read into the vegetation image.
+#[derive(Debug, Clone, Copy)]
+enum Colour {
+    /// RGB, pixel by pixel.
+    Rgb,
+    /// RGB binned 2×2.
+    RgbBinned,
+    /// Bayer RGGB, by quads.
+    Bayer,
+}
+
+/// The vegetation index `f` (R, 2G, B → byte) of colour input (`w` wide, `oh` output rows)
+/// into `out`: RGB pixel by pixel or binned 2×2, Bayer by quads.
+fn colour(
+    layout: Colour,
+    d: &[u8],
+    w: usize,
+    oh: usize,
+    out: &mut [u8],
+    f: impl Fn(i32, i32, i32) -> u8,
+) {
+    match layout {
+        Colour::Rgb => {
+            for (o, p) in out.iter_mut().zip(d.chunks_exact(3)) {
                 *o = f(p[0] as i32, 2 * p[1] as i32, p[2] as i32);
             }
         }
-        (PixelFormat::Rgb8, _) => {
+        Colour::RgbBinned => {
+            let ow = w / 2;
             for r in 0..oh {
                 let a = &d[2 * r * w * 3..(2 * r + 1) * w * 3];
                 let b = &d[(2 * r + 1) * w * 3..(2 * r + 2) * w * 3];
-                let o = &mut out.data[r * ow..(r + 1) * ow];
+                let o = &mut out[r * ow..(r + 1) * ow];
                 for (c, v) in o.iter_mut().enumerate() {
                     let i = 6 * c;
                     let sum = |k: usize| -> i32 {
@@ -209,39 +263,13 @@ pub fn vegetation_image(
                 }
             }
         }
-        (PixelFormat::BayerRggb8, _) => {
-            // The quad's two greens are centred on it, but its red sits half a pixel up and
-            // left and its blue half a pixel down and right: read as they are, every edge
-            // whose red and blue contrasts differ (plant against soil) shifts, which moves
-            // a row's fitted centre line by a fraction of a pixel that does not average out.
-            // Red and blue are interpolated (bilinearly, from the four nearest samples of
-            // each, clamped at the borders) to the quad's centre.
-            // One instance per index, so that each inner loop inlines its index.
-            let o = &mut out.data;
-            match index {
-                VegetationIndex::Luma => bayer_centred(d, w, oh, o, luma),
-                VegetationIndex::ChromaticExcessGreen => bayer_centred(d, w, oh, o, chroma_exg),
-                VegetationIndex::ExcessGreenMinusRed => bayer_centred(d, w, oh, o, exg_exr),
-                VegetationIndex::Auto | VegetationIndex::ExcessGreen => {
-                    bayer_centred(d, w, oh, o, exg)
-                }
-            }
-        }
-    }
-    Ok(VegetationResult {
-        factor: factor as u32,
-        width: ow,
-        height: oh,
-    })
-}
-
-/// The per-pixel function of a resolved index (R, 2G, B → byte).
-fn index_fn(index: VegetationIndex) -> fn(i32, i32, i32) -> u8 {
-    match index {
-        VegetationIndex::Luma => luma,
-        VegetationIndex::ChromaticExcessGreen => chroma_exg,
-        VegetationIndex::ExcessGreenMinusRed => exg_exr,
-        VegetationIndex::Auto | VegetationIndex::ExcessGreen => exg,
+        // The quad's two greens are centred on it, but its red sits half a pixel up and
+        // left and its blue half a pixel down and right: read as they are, every edge whose
+        // red and blue contrasts differ (plant against soil) shifts, which moves a row's
+        // fitted centre line by a fraction of a pixel that does not average out. Red and
+        // blue are interpolated (bilinearly, from the four nearest samples of each, clamped
+        // at the borders) to the quad's centre.
+        Colour::Bayer => bayer_centred(d, w, oh, out, f),
     }
 }
 
