@@ -613,17 +613,7 @@ impl StripsRows {
         if row.iter().all(|&x| x == 0.0) {
             return;
         }
-        let half = self.kernel.len() / 2;
-        self.smooth.clear();
-        for i in 0..bins {
-            let lo = i.saturating_sub(half);
-            let hi = (i + half).min(bins - 1);
-            let mut acc = 0.0;
-            for (j, x) in row.iter().enumerate().take(hi + 1).skip(lo) {
-                acc += x * self.kernel[j + half - i];
-            }
-            self.smooth.push(acc);
-        }
+        smooth_profile(row, &self.kernel, &mut self.smooth);
         self.scratch.clear();
         self.scratch.extend_from_slice(&self.smooth);
         let mid = self.scratch.len() / 2;
@@ -1020,6 +1010,42 @@ impl StripsRows {
             }
         }
     }
+}
+
+/// `row` convolved with the odd-length `kernel` into `out` (cleared first), the kernel cut
+/// at the row's ends: out[i] = Σ over j within the kernel's reach of i and inside the row of
+/// row[j]·kernel[j + half − i], summed in increasing j. Where the kernel lies wholly inside
+/// the row, eight outputs at a time (each summed in the same order, so the same to the bit).
+fn smooth_profile(row: &[f64], kernel: &[f64], out: &mut Vec<f64>) {
+    const LANES: usize = 8;
+    let (bins, half) = (row.len(), kernel.len() / 2);
+    let cut = |i: usize| {
+        let (lo, hi) = (
+            i.saturating_sub(half),
+            (i + half).min(bins.saturating_sub(1)),
+        );
+        let mut acc = 0.0;
+        for (j, x) in row.iter().enumerate().take(hi + 1).skip(lo) {
+            acc += x * kernel[j + half - i];
+        }
+        acc
+    };
+    out.clear();
+    // outputs half..inner_end in blocks of eight have the whole kernel inside the row
+    let inner = bins.saturating_sub(2 * half);
+    let inner_end = half + inner / LANES * LANES;
+    out.extend((0..half.min(bins)).map(cut));
+    for i0 in (half..inner_end).step_by(LANES) {
+        let mut acc = [0.0f64; LANES];
+        for (t, &k) in kernel.iter().enumerate() {
+            let x = &row[i0 - half + t..i0 - half + t + LANES];
+            for l in 0..LANES {
+                acc[l] += x[l] * k;
+            }
+        }
+        out.extend_from_slice(&acc);
+    }
+    out.extend((out.len()..bins).map(cut));
 }
 
 /// Σ wᵢ·cos(f·uᵢ) and Σ wᵢ·sin(f·uᵢ): the Fourier component at angular frequency `f` of
@@ -1547,6 +1573,31 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("strips") && e.contains("forward-looking"), "{e}");
+    }
+
+    #[test]
+    fn the_profile_smoothed_in_blocks_is_the_cut_convolution_to_the_bit() {
+        let mut next = uniform(9);
+        let mut out = Vec::new();
+        for bins in [0, 1, 2, 5, 16, 17, 33, 40, 257] {
+            for half in [0, 1, 3, 8] {
+                let row: Vec<f64> = (0..bins)
+                    .map(|_| if next() < 0.3 { 0.0 } else { next() * 100.0 })
+                    .collect();
+                let kernel: Vec<f64> = (0..2 * half + 1).map(|_| next()).collect();
+                smooth_profile(&row, &kernel, &mut out);
+                assert_eq!(out.len(), bins);
+                for (i, &o) in out.iter().enumerate() {
+                    let mut want = 0.0;
+                    for (j, x) in row.iter().enumerate() {
+                        if j + half >= i && j <= i + half {
+                            want += x * kernel[j + half - i];
+                        }
+                    }
+                    assert_eq!(o.to_bits(), want.to_bits(), "bins {bins} half {half} i {i}");
+                }
+            }
+        }
     }
 
     #[test]
