@@ -373,7 +373,7 @@ pub struct StripsRows {
     prior: Option<(Vector3<f64>, f64)>,
     starts: Vec<(f64, f64, f64)>,
     seen: Vec<Seen>,
-    /// `seen` in columns, for the agreement's pair sums.
+    /// `seen` in columns, for the agreement's pair sums and the comb's Fourier sums.
     columns: SeenColumns,
     /// The peaks below a candidate before sorting, and their sort keys.
     unsorted: Vec<Seen>,
