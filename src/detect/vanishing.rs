@@ -129,6 +129,9 @@ pub struct VanishingFinder {
     cos_e: Vec<f64>,
     sin_e: Vec<f64>,
     elev_bins: usize,
+    /// tan of the elevation bins' edges, −`max_tilt` to `max_tilt` (`elev_bins` + 1): a
+    /// great circle's elevation is found among them by its tangent, without an arc tangent.
+    tan_edges: Vec<f64>,
     acc: Vec<f64>,
     robot_normals: Vec<Vector3<f64>>,
     /// The search window of the next runs ([`VanishingFinder::set_window`]): the expected
@@ -157,6 +160,10 @@ impl VanishingFinder {
             .map(|(s, c)| (c, s))
             .unzip();
         let elev_bins = (2.0 * max_tilt_deg / opts.elevation_bin_deg()).ceil() as usize;
+        let tilt = max_tilt_deg.to_radians();
+        let tan_edges = (0..=elev_bins)
+            .map(|m| (-tilt + m as f64 * 2.0 * tilt / elev_bins as f64).tan())
+            .collect();
         Ok(VanishingFinder {
             opts,
             max_tilt: max_tilt_deg.to_radians(),
@@ -164,6 +171,7 @@ impl VanishingFinder {
             cos_e,
             sin_e,
             elev_bins,
+            tan_edges,
             acc: vec![0.0; a * elev_bins],
             robot_normals: Vec::with_capacity(64),
             window: None,
@@ -299,34 +307,38 @@ impl VanishingFinder {
         })
     }
 
+    /// Each row's great circle votes, with its weight, for the cells it crosses: between
+    /// two neighbouring azimuths its elevation spans a range of bins. The elevation's tangent
+    /// (t / n.z) is placed among the bins' edges' tangents, which orders it as its angle.
     fn vote(&mut self, weights: &[f64]) {
         let a = self.opts.azimuth_bins();
         let e = self.elev_bins;
-        let tilt = self.max_tilt;
-        let scale = e as f64 / (2.0 * tilt);
         self.acc.fill(0.0);
+        let edges = &self.tan_edges;
+        let (below, above) = (edges[0], edges[e]);
+        // the bin of tangent x: the inner edges at or below it
+        let bin = |x: f64| edges[1..e].partition_point(|&t| t <= x);
         for (n, &w) in self.robot_normals.iter().zip(weights) {
             if w <= 0.0 {
                 continue;
             }
-            let beta = |k: usize| -> f64 {
+            let tangent = |k: usize| -> f64 {
                 let t = -(n.x * self.cos_e[k] + n.y * self.sin_e[k]);
                 if n.z == 0.0 {
-                    std::f64::consts::FRAC_PI_2.copysign(t)
+                    f64::INFINITY.copysign(t)
                 } else {
-                    (t / n.z).atan()
+                    t / n.z
                 }
             };
-            let mut b0 = beta(0);
+            let mut x0 = tangent(0);
             for k in 0..a {
-                let b1 = beta(k + 1);
-                let (lo, hi) = if b0 <= b1 { (b0, b1) } else { (b1, b0) };
-                b0 = b1;
-                if hi < -tilt || lo > tilt {
+                let x1 = tangent(k + 1);
+                let (lo, hi) = if x0 <= x1 { (x0, x1) } else { (x1, x0) };
+                x0 = x1;
+                if hi < below || lo > above {
                     continue;
                 }
-                let j0 = (((lo.max(-tilt) + tilt) * scale) as usize).min(e - 1);
-                let j1 = (((hi.min(tilt) + tilt) * scale) as usize).min(e - 1);
+                let (j0, j1) = (bin(lo), bin(hi));
                 for v in &mut self.acc[k * e + j0..=k * e + j1] {
                     *v += w;
                 }
@@ -414,6 +426,63 @@ mod tests {
     use super::*;
     use crate::detect::Method;
     use crate::sphere::{any_perpendicular, canonical};
+
+    /// The vote as it was written first: each great circle's elevation by its arc tangent.
+    fn vote_by_angles(f: &VanishingFinder, weights: &[f64]) -> Vec<f64> {
+        let (a, e, tilt) = (f.opts.azimuth_bins(), f.elev_bins, f.max_tilt);
+        let scale = e as f64 / (2.0 * tilt);
+        let mut acc = vec![0.0; a * e];
+        for (n, &w) in f.robot_normals.iter().zip(weights) {
+            let beta = |k: usize| {
+                let t = -(n.x * f.cos_e[k] + n.y * f.sin_e[k]);
+                if n.z == 0.0 {
+                    std::f64::consts::FRAC_PI_2.copysign(t)
+                } else {
+                    (t / n.z).atan()
+                }
+            };
+            for k in 0..a {
+                let (b0, b1) = (beta(k), beta(k + 1));
+                let (lo, hi) = (b0.min(b1), b0.max(b1));
+                if hi < -tilt || lo > tilt {
+                    continue;
+                }
+                let j0 = (((lo.max(-tilt) + tilt) * scale) as usize).min(e - 1);
+                let j1 = (((hi.min(tilt) + tilt) * scale) as usize).min(e - 1);
+                for v in &mut acc[k * e + j0..=k * e + j1] {
+                    *v += w;
+                }
+            }
+        }
+        acc
+    }
+
+    #[test]
+    fn the_vote_by_tangents_fills_the_cells_the_angles_did() {
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        };
+        for (tilt, opts) in [
+            (15.0, VanishingOptions::default()),
+            (40.0, VanishingOptions::default()),
+        ] {
+            let mut f = VanishingFinder::new(opts, tilt, &Mounting::default()).unwrap();
+            f.robot_normals.clear();
+            // random circles, steep and shallow ones, and some through the zenith (n.z = 0)
+            for i in 0..3000 {
+                let z = if i % 50 == 0 { 0.0 } else { next() * next() };
+                f.robot_normals
+                    .push(Vector3::new(next(), next(), z).normalize());
+            }
+            let weights: Vec<f64> = (0..3000).map(|i| 1.0 + (i % 7) as f64).collect();
+            f.vote(&weights);
+            assert_eq!(f.acc, vote_by_angles(&f, &weights), "max tilt {tilt}°");
+        }
+    }
 
     fn rows_through(vp: &Vector3<f64>, angles: &[f64], support: u32) -> Vec<Row> {
         let a = any_perpendicular(vp);
