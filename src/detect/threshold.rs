@@ -92,18 +92,29 @@ pub fn keep_brightest(
     out.clear();
     // Masked pixels land in bin 0 (mask bytes are 0 or 0xFF). Four histograms interleaved
     // so that runs of equal values do not serialise on one counter.
+    // Blocks the mask leaves out whole (a lens's image circle leaves a third of the frame
+    // black) are only counted into bin 0.
     let mut hists = [[0u32; 256]; 4];
-    let mut chunks = image.chunks_exact(4).zip(mask.chunks_exact(4));
-    for (v, m) in &mut chunks {
-        hists[0][(v[0] & m[0]) as usize] += 1;
-        hists[1][(v[1] & m[1]) as usize] += 1;
-        hists[2][(v[2] & m[2]) as usize] += 1;
-        hists[3][(v[3] & m[3]) as usize] += 1;
+    let mut outside = 0u32;
+    const BLOCK: usize = 64;
+    for (vb, mb) in image.chunks(BLOCK).zip(mask.chunks(BLOCK)) {
+        if mb.iter().fold(0u8, |a, &m| a | m) == 0 {
+            outside += mb.len() as u32;
+            continue;
+        }
+        let mut chunks = vb.chunks_exact(4).zip(mb.chunks_exact(4));
+        for (v, m) in &mut chunks {
+            hists[0][(v[0] & m[0]) as usize] += 1;
+            hists[1][(v[1] & m[1]) as usize] += 1;
+            hists[2][(v[2] & m[2]) as usize] += 1;
+            hists[3][(v[3] & m[3]) as usize] += 1;
+        }
+        let tail = vb.len() / 4 * 4;
+        for (&v, &m) in vb[tail..].iter().zip(&mb[tail..]) {
+            hists[0][(v & m) as usize] += 1;
+        }
     }
-    let tail = image.len() / 4 * 4;
-    for (&v, &m) in image[tail..].iter().zip(&mask[tail..]) {
-        hists[0][(v & m) as usize] += 1;
-    }
+    hists[0][0] += outside;
     let mut hist = [0u32; 256];
     for (i, h) in hist.iter_mut().enumerate() {
         *h = hists[0][i] + hists[1][i] + hists[2][i] + hists[3][i];
@@ -157,7 +168,6 @@ pub fn keep_brightest(
     let level_u8 = level.min(255) as u8;
     let mut count_at = 0u32;
     // Scan in blocks, skipping (with a vectorised maximum) blocks with nothing to keep.
-    const BLOCK: usize = 64;
     for (b, (vb, mb)) in image.chunks(BLOCK).zip(mask.chunks(BLOCK)).enumerate() {
         let max = vb.iter().zip(mb).fold(0u8, |a, (&v, &m)| a.max(v & m));
         if max < level_u8 {
@@ -251,6 +261,34 @@ mod tests {
     }
 
     proptest! {
+        #[test]
+        fn masked_runs_count_as_masked(seed in 0u64..1000, n in 1usize..2000) {
+            // runs of masked and valid pixels, long enough to leave whole blocks out
+            let mut s = seed.wrapping_mul(6364136223846793005).wrapping_add(1);
+            let mut next = move || { s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407); s >> 33 };
+            let mut image = Vec::new();
+            let mut mask = Vec::new();
+            while image.len() < 6000 {
+                let (len, m) = (1 + next() as usize % 300, if next() % 2 == 0 { 0 } else { 0xFF });
+                for _ in 0..len {
+                    image.push((next() >> 23) as u8);
+                    mask.push(m);
+                }
+            }
+            let mut out = Vec::new();
+            let opts = ThresholdOptions { target_points: Some(n), min_level: 10 };
+            let r = keep_brightest(&image, &mask, &opts, &mut out).unwrap();
+            let mut valid: Vec<u8> = image.iter().zip(&mask).filter(|p| *p.1 != 0).map(|p| *p.0).collect();
+            valid.sort_unstable();
+            if !valid.is_empty() {
+                prop_assert_eq!(r.median, valid[valid.len() / 2]);
+            }
+            prop_assert_eq!(r.candidates, valid.iter().filter(|&&v| v > 10).count());
+            for &i in &out { prop_assert!(mask[i as usize] != 0 && image[i as usize] >= r.level); }
+            let above = valid.iter().filter(|&&v| v > r.level).count();
+            prop_assert!(out.len() >= above);
+        }
+
         #[test]
         fn kept_count_is_near_target(seed in 0u64..1000, n in 1usize..500) {
             // pseudo-random image
