@@ -478,6 +478,36 @@ mod tests {
     }
 
     #[test]
+    fn mono_binning_is_the_rounded_mean_of_each_quad() {
+        // a width that is not a multiple of any run or lane count
+        let (w, h) = (614, 42);
+        let mut s = 0x2545_f491_4f6c_dd1du64;
+        let data: Vec<u8> = (0..w * h)
+            .map(|_| {
+                s ^= s << 13;
+                s ^= s >> 7;
+                s ^= s << 17;
+                (s >> 56) as u8
+            })
+            .collect();
+        let view = ImageView::new(w as u32, h as u32, PixelFormat::Mono8, &data).unwrap();
+        let mut out = GreyImage::default();
+        vegetation_image(&view, &VegetationOptions::default(), true, &mut out).unwrap();
+        let (ow, oh) = (w / 2, h / 2);
+        assert_eq!((out.width, out.height), (ow, oh));
+        for r in 0..oh {
+            for c in 0..ow {
+                let at = |y: usize, x: usize| data[y * w + x] as u32;
+                let q = at(2 * r, 2 * c)
+                    + at(2 * r, 2 * c + 1)
+                    + at(2 * r + 1, 2 * c)
+                    + at(2 * r + 1, 2 * c + 1);
+                assert_eq!(out.data[r * ow + c] as u32, (q + 2) >> 2, "({r}, {c})");
+            }
+        }
+    }
+
+    #[test]
     fn brightness_of_each_format() {
         let rgb = [10u8, 20, 30];
         let v = ImageView::new(1, 1, PixelFormat::Rgb8, &rgb).unwrap();
