@@ -17,6 +17,7 @@ pub mod frame;
 pub mod gige;
 pub mod guidance;
 pub mod logging;
+pub mod memory;
 pub mod notify;
 pub mod pipeline;
 pub mod publish;

@@ -94,11 +94,15 @@ pub fn build_mask(
             )));
         }
     }
+    // Tables of the whole working image, read every frame: on huge pages where there are.
     mask.clear();
+    crate::memory::reserve_huge(mask, w * h);
     mask.resize(w * h, 0);
     rays.clear();
+    crate::memory::reserve_huge(rays, w * h);
     rays.resize(w * h, [0.0; 3]);
     solid.clear();
+    crate::memory::reserve_huge(solid, w * h);
     solid.resize(w * h, 0.0);
     let model = &cal.model;
     let omega = |r: f64, c: f64| -> f64 {
