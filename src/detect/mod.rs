@@ -26,6 +26,19 @@ pub mod threshold;
 pub mod vanishing;
 pub mod vegetation;
 
+/// `n` pseudo-random bytes (xorshift64 from `seed`, non-zero), for the stages' tests.
+#[cfg(test)]
+pub(crate) fn noise_bytes(mut seed: u64, n: usize) -> Vec<u8> {
+    (0..n)
+        .map(|_| {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 56) as u8
+        })
+        .collect()
+}
+
 pub use detector::{
     CombinedOptions, Detector, DetectorOptions, Points, Preparer, PriorOutcome, VanishingStage,
 };

@@ -205,17 +205,10 @@ mod tests {
 
     #[test]
     fn the_passes_are_the_definition_to_the_bit() {
-        let mut s = 0x9e37_79b9_7f4a_7c15u64;
         for (sigma, width, height) in [(0.8, 300, 41), (1.5, 613, 17), (3.0, 40, 9)] {
             let g = Gaussian::new(&SmoothOptions { sigma_px: sigma }).unwrap();
-            let src: Vec<u8> = (0..width * height)
-                .map(|_| {
-                    s ^= s << 13;
-                    s ^= s >> 7;
-                    s ^= s << 17;
-                    (s >> 56) as u8
-                })
-                .collect();
+            let src =
+                crate::detect::noise_bytes(0x9e37_79b9_7f4a_7c15 ^ width as u64, width * height);
             let (mut tmp, mut dst) = (Vec::new(), vec![0u8; width * height]);
             g.apply(&src, width, height, &mut tmp, &mut dst).unwrap();
             assert_eq!(dst, by_definition(&g, &src, width, height), "sigma {sigma}");

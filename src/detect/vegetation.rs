@@ -481,15 +481,7 @@ mod tests {
     fn mono_binning_is_the_rounded_mean_of_each_quad() {
         // a width that is not a multiple of any run or lane count
         let (w, h) = (614, 42);
-        let mut s = 0x2545_f491_4f6c_dd1du64;
-        let data: Vec<u8> = (0..w * h)
-            .map(|_| {
-                s ^= s << 13;
-                s ^= s >> 7;
-                s ^= s << 17;
-                (s >> 56) as u8
-            })
-            .collect();
+        let data = crate::detect::noise_bytes(0x2545_f491_4f6c_dd1d, w * h);
         let view = ImageView::new(w as u32, h as u32, PixelFormat::Mono8, &data).unwrap();
         let mut out = GreyImage::default();
         vegetation_image(&view, &VegetationOptions::default(), true, &mut out).unwrap();
