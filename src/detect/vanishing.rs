@@ -166,7 +166,7 @@ impl VanishingFinder {
             .collect();
         Ok(VanishingFinder {
             opts,
-            max_tilt: max_tilt_deg.to_radians(),
+            max_tilt: tilt,
             robot_from_camera: mounting.robot_from_camera(),
             cos_e,
             sin_e,
