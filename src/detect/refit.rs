@@ -12,6 +12,7 @@ use super::hough::fast_atan2;
 use super::sections::{NearField, Sections};
 use super::{DetectError, Row};
 use crate::camera::OcamModel;
+use crate::memory::prefetch;
 use crate::sphere::{any_perpendicular, canonical, Fit, Scatter};
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
@@ -159,24 +160,43 @@ pub struct NearFoot {
     pub foot: Vector3<f64>,
 }
 
-/// The pixels a row's refit reads, reused from row to row: their indices and, where
-/// computed, their angles along the row's starting great circle.
+/// The pixels a row's refit reads, reused from row to row: copied side by side as they are
+/// collected (their rays, values and solid angles), so that each fit reads them in order
+/// rather than gathering them from the image's tables, megabytes apart; and, where computed,
+/// their angles along the row's starting great circle.
 #[derive(Debug, Clone, Default)]
 pub struct Candidates {
-    index: Vec<u32>,
-    along: Vec<f32>,
-    /// Scratch of the collection: the candidates' rays, gathered while they are collected
-    /// for their angles along the row (not kept in step with `index` afterwards).
     rays: Vec<[f32; 3]>,
+    values: Vec<u8>,
+    solid: Vec<f32>,
+    along: Vec<f32>,
 }
 
 impl Candidates {
     pub fn with_capacity(pixels: usize) -> Self {
         Candidates {
-            index: Vec::with_capacity(pixels),
-            along: Vec::with_capacity(pixels),
             rays: Vec::with_capacity(pixels),
+            values: Vec::with_capacity(pixels),
+            solid: Vec::with_capacity(pixels),
+            along: Vec::with_capacity(pixels),
         }
+    }
+
+    fn len(&self) -> usize {
+        self.rays.len()
+    }
+
+    fn clear(&mut self) {
+        self.rays.clear();
+        self.values.clear();
+        self.solid.clear();
+        self.along.clear();
+    }
+
+    fn truncate(&mut self, len: usize) {
+        self.rays.truncate(len);
+        self.values.truncate(len);
+        self.solid.truncate(len);
     }
 }
 
@@ -470,13 +490,13 @@ fn refit_row(
         // pixel, which leaves the stretches where its cross-section is whole unchanged.
         keep_full_sections(img, &n, foot_band, margin, wedge, cands);
     }
-    let candidates = &cands.index;
+    let candidates = &*cands;
     let band = Band {
         s_band: (foot_band + margin).min(1.5).sin() as f32,
         s_foot: foot_band.min(1.5).sin() as f32,
         s_margin: margin.sin() as f32,
         wedge: wedge.map(|v| [v.x as f32, v.y as f32, v.z as f32]),
-        cap: plateau_cap(img.values, candidates, img.background, opts.plateau_cap),
+        cap: plateau_cap(&candidates.values, img.background, opts.plateau_cap),
     };
     // Noise only matters for the variance along the vanishing point.
     let track = vp.is_some();
@@ -493,7 +513,7 @@ fn refit_row(
             }
         }
         if opts.sections {
-            let along = along_valid.then_some(&cands.along[..]);
+            let along = along_valid.then_some(&candidates.along[..]);
             let sec = section_step(img, &band, candidates, along, &n, opts, vp);
             along_valid = false;
             if let Some(sf) = sec.fit {
@@ -542,12 +562,26 @@ struct Band {
     cap: u8,
 }
 
+/// A candidate inside a row's band as [`Band::pixels`] gives it.
+#[derive(Debug, Clone, Copy)]
+struct InBand {
+    /// Position among the candidates.
+    k: usize,
+    ray: [f32; 3],
+    /// Signed offset n·p from the circle.
+    d: f32,
+    /// Value above the background (clipped at the band's cap) times solid angle.
+    w: f64,
+    value: u8,
+    solid: f32,
+}
+
 impl Band {
-    /// The signed offset n·p of pixel `i` from the circle of `nf` and its weight (value above
-    /// the background times solid angle), or `None` outside the band.
+    /// The signed offset n·p of the candidate `k` from the circle of `nf` and its weight
+    /// (value above the background times solid angle), or `None` outside the band.
     #[inline]
-    fn read(&self, img: &RefitImage, nf: &[f32; 3], i: usize) -> Option<(f32, f64)> {
-        let p = img.rays[i];
+    fn read(&self, img: &RefitImage, c: &Candidates, nf: &[f32; 3], k: usize) -> Option<InBand> {
+        let p = c.rays[k];
         let ds = nf[0] * p[0] + nf[1] * p[1] + nf[2] * p[2];
         let d = ds.abs();
         if d >= self.s_band {
@@ -559,31 +593,34 @@ impl Band {
                 return None;
             }
         }
-        let w = (img.values[i].min(self.cap) - img.background) as f64 * img.solid[i] as f64;
-        Some((ds, w))
-    }
-}
-
-impl Band {
-    /// The candidates inside the band of `n`: (position in `candidates`, pixel index, signed
-    /// offset, weight), as [`Band::read`] gives them.
-    fn pixels<'a>(
-        &'a self,
-        img: &'a RefitImage,
-        candidates: &'a [u32],
-        n: &Vector3<f64>,
-    ) -> impl Iterator<Item = (usize, usize, f32, f64)> + 'a {
-        let nf = to_f32(n);
-        candidates.iter().enumerate().filter_map(move |(k, &i)| {
-            let i = i as usize;
-            self.read(img, &nf, i).map(|(d, w)| (k, i, d, w))
+        let (value, solid) = (c.values[k], c.solid[k]);
+        let w = (value.min(self.cap) - img.background) as f64 * solid as f64;
+        Some(InBand {
+            k,
+            ray: p,
+            d: ds,
+            w,
+            value,
+            solid,
         })
     }
 }
 
-/// Pixel `i`'s ray in double precision.
-fn ray64(img: &RefitImage, i: usize) -> Vector3<f64> {
-    let p = img.rays[i];
+impl Band {
+    /// The candidates inside the band of `n`, as [`Band::read`] gives them.
+    fn pixels<'a>(
+        &'a self,
+        img: &'a RefitImage,
+        candidates: &'a Candidates,
+        n: &Vector3<f64>,
+    ) -> impl Iterator<Item = InBand> + 'a {
+        let nf = to_f32(n);
+        (0..candidates.len()).filter_map(move |k| self.read(img, candidates, &nf, k))
+    }
+}
+
+/// A ray in double precision.
+fn ray64(p: [f32; 3]) -> Vector3<f64> {
     Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64)
 }
 
@@ -597,7 +634,7 @@ fn to_f32(v: &Vector3<f64>) -> [f32; 3] {
 fn perspective_step(
     img: &RefitImage,
     band: &Band,
-    candidates: &[u32],
+    candidates: &Candidates,
     n: &Vector3<f64>,
     v: &Vector3<f64>,
 ) -> Option<Vector3<f64>> {
@@ -605,8 +642,8 @@ fn perspective_step(
     let e1 = n.cross(&e2);
     let mut ata = nalgebra::Matrix3::<f64>::zeros();
     let mut atb = Vector3::<f64>::zeros();
-    for (_, i, _, w) in band.pixels(img, candidates, n) {
-        let pv = ray64(img, i);
+    for InBand { ray, w, .. } in band.pixels(img, candidates, n) {
+        let pv = ray64(ray);
         let g = e1.dot(&pv);
         let phi = Vector3::new(g, e2.dot(&pv), -g * g * g);
         ata += w * phi * phi.transpose();
@@ -629,7 +666,7 @@ struct SectionStep {
 fn section_step(
     img: &RefitImage,
     band: &Band,
-    candidates: &[u32],
+    candidates: &Candidates,
     along: Option<&[f32]>,
     n: &Vector3<f64>,
     opts: &RefitOptions,
@@ -638,10 +675,10 @@ fn section_step(
     let mut sections = Sections::new(n, opts.section_bins);
     let (f1, f2) = sections.frame();
     let (f1, f2) = (to_f32(&f1), to_f32(&f2));
-    for (k, i, d, w) in band.pixels(img, candidates, n) {
+    for InBand { k, ray, d, w, .. } in band.pixels(img, candidates, n) {
         let s = match along {
             Some(a) => a[k],
-            None => angle_along(&f1, &f2, img.rays[i]),
+            None => angle_along(&f1, &f2, ray),
         };
         sections.add(s, d, w);
     }
@@ -658,17 +695,17 @@ fn section_step(
 fn pixel_fit(
     img: &RefitImage,
     band: &Band,
-    candidates: &[u32],
+    candidates: &Candidates,
     n: &Vector3<f64>,
     track: bool,
 ) -> Option<PixelFit> {
     let mut sc = Scatter::new();
     let mut noise = [0f64; 6];
-    for (_, i, d, w) in band.pixels(img, candidates, n) {
-        let pv = ray64(img, i);
-        sc.add(&pv, w);
-        if track && img.values[i] < band.cap {
-            let k = (img.solid[i] as f64 * d.abs() as f64).powi(2);
+    for c in band.pixels(img, candidates, n) {
+        let pv = ray64(c.ray);
+        sc.add(&pv, c.w);
+        if track && c.value < band.cap {
+            let k = (c.solid as f64 * c.d.abs() as f64).powi(2);
             let (x, y, z) = (pv.x, pv.y, pv.z);
             noise[0] += k * x * x;
             noise[1] += k * x * y;
@@ -731,17 +768,17 @@ fn along_variance(
 }
 
 /// The level at which a row's pixel values are clipped: `background` + `fraction` × (the
-/// median of the `candidates`' values − `background`); 255 (no clipping) when `fraction` is 0
+/// median of the candidates' `values` − `background`); 255 (no clipping) when `fraction` is 0
 /// or there are no candidates.
-fn plateau_cap(values: &[u8], candidates: &[u32], background: u8, fraction: f64) -> u8 {
-    if fraction <= 0.0 || candidates.is_empty() {
+fn plateau_cap(values: &[u8], background: u8, fraction: f64) -> u8 {
+    if fraction <= 0.0 || values.is_empty() {
         return 255;
     }
     let mut hist = [0u32; 256];
-    for &i in candidates {
-        hist[values[i as usize] as usize] += 1;
+    for &v in values {
+        hist[v as usize] += 1;
     }
-    let half = candidates.len() as u32 / 2;
+    let half = values.len() as u32 / 2;
     let mut acc = 0u32;
     let mut median = 255u8;
     for (v, &c) in hist.iter().enumerate() {
@@ -787,17 +824,22 @@ fn keep_full_sections(
     }
     let ks = SECTION_SAMPLES as f32 / std::f32::consts::TAU;
     let mut kept = 0;
-    for k in 0..cands.index.len() {
+    for k in 0..cands.len() {
         let a = cands.along[k];
         if sections[((a * ks + 0.5) as i32).rem_euclid(SECTION_SAMPLES as i32) as usize] {
-            cands.index[kept] = cands.index[k];
+            cands.rays[kept] = cands.rays[k];
+            cands.values[kept] = cands.values[k];
+            cands.solid[kept] = cands.solid[k];
             cands.along[kept] = a;
             kept += 1;
         }
     }
-    cands.index.truncate(kept);
+    cands.truncate(kept);
     cands.along.truncate(kept);
 }
+
+/// How many image rows ahead [`collect_candidates`] asks for a tile's stretches.
+const PREFETCH_ROWS: usize = 4;
 
 /// Writes into `cands` the pixels above the background within the band of `n`: half-width
 /// `foot_band` + `margin`, or with a vanishing point `vp` the wedge `foot_band`·sin(angle
@@ -815,9 +857,7 @@ fn collect_candidates(
     along: bool,
     cands: &mut Candidates,
 ) {
-    cands.index.clear();
-    cands.along.clear();
-    cands.rays.clear();
+    cands.clear();
     let wedge = vp.is_some();
     let f1 = any_perpendicular(n);
     let (f1, f2) = (to_f32(&f1), to_f32(&n.cross(&f1)));
@@ -845,7 +885,23 @@ fn collect_candidates(
         }
         let (r0, c0) = (tile.r0 as usize, tile.c0 as usize);
         let cols = (c0 + t.size).min(t.width) - c0;
-        for r in r0..(r0 + t.size).min(t.height) {
+        let r_end = (r0 + t.size).min(t.height);
+        // Each stretch lies an image row from the last, too far apart for the hardware's
+        // prefetchers: the stretches a few rows ahead are asked for explicitly.
+        let ahead = |r: usize| {
+            if r < r_end {
+                let lo = r * t.width + c0;
+                prefetch(&img.values[lo..lo + cols]);
+                prefetch(&img.mask[lo..lo + cols]);
+                prefetch(&img.rays[lo..lo + cols]);
+                prefetch(&img.solid[lo..lo + cols]);
+            }
+        };
+        for r in r0..r0 + PREFETCH_ROWS {
+            ahead(r);
+        }
+        for r in r0..r_end {
+            ahead(r + PREFETCH_ROWS);
             let lo = r * t.width + c0;
             // A stretch of background (between plants) costs no rays' reads.
             let (vals, mask) = (&img.values[lo..lo + cols], &img.mask[lo..lo + cols]);
@@ -855,9 +911,10 @@ fn collect_candidates(
             // Every pixel of the tile's row is written and the end moves past the ones kept:
             // at a plant's edge whether a pixel is in changes from pixel to pixel, and
             // branches on it mispredicted.
-            let len = cands.index.len();
-            cands.index.resize(len + cols, 0);
+            let len = cands.len();
             cands.rays.resize(len + cols, [0.0; 3]);
+            cands.values.resize(len + cols, 0);
+            cands.solid.resize(len + cols, 0.0);
             let mut k = len;
             for i in lo..lo + cols {
                 let p = img.rays[i];
@@ -865,12 +922,12 @@ fn collect_candidates(
                 let d = (nf[0] * p[0] + nf[1] * p[1] + nf[2] * p[2]).abs();
                 let a = vf[0] * p[0] + vf[1] * p[1] + vf[2] * p[2];
                 let in_wedge = !wedge | (d < s_foot * (1.0 - a * a).max(0.0).sqrt() + s_margin);
-                cands.index[k] = i as u32;
                 cands.rays[k] = p;
+                cands.values[k] = img.values[i];
+                cands.solid[k] = img.solid[i];
                 k += (above & (d < s_band) & in_wedge) as usize;
             }
-            cands.index.truncate(k);
-            cands.rays.truncate(k);
+            cands.truncate(k);
         }
     }
     if along {
