@@ -170,6 +170,9 @@ pub struct Candidates {
     values: Vec<u8>,
     solid: Vec<f32>,
     along: Vec<f32>,
+    /// Scratch of the collection: the image-row stretches (first pixel, length) of the tiles
+    /// the row's band meets.
+    stretches: Vec<(u32, u32)>,
 }
 
 impl Candidates {
@@ -179,6 +182,7 @@ impl Candidates {
             values: Vec::with_capacity(pixels),
             solid: Vec::with_capacity(pixels),
             along: Vec::with_capacity(pixels),
+            stretches: Vec::new(),
         }
     }
 
@@ -838,8 +842,100 @@ fn keep_full_sections(
     cands.along.truncate(kept);
 }
 
-/// How many image rows ahead [`collect_candidates`] asks for a tile's stretches.
-const PREFETCH_ROWS: usize = 4;
+/// Which pixels [`collect_candidates`] keeps: above the background, within the band of the
+/// circle `nf` (half-width sine `s_band`) and, with a `wedge`, within `s_foot`·(sine of the
+/// angle from `vf`) + `s_margin` of it.
+struct PixelTest {
+    nf: [f32; 3],
+    vf: [f32; 3],
+    wedge: bool,
+    background: u8,
+    s_band: f32,
+    s_foot: f32,
+    s_margin: f32,
+}
+
+/// The pixels of an image row's stretch [`PixelTest::collect`] tests at once.
+const STRETCH: usize = 16;
+
+impl PixelTest {
+    /// Appends to `cands` the pixels `lo..lo + len` that pass. Each run of up to [`STRETCH`]
+    /// pixels is tested first, all lanes alike (so that the tests vectorise), then every
+    /// pixel is written and the end moves past the ones kept: at a plant's edge whether a
+    /// pixel is in changes from pixel to pixel, and branches on it mispredicted.
+    fn collect(&self, img: &RefitImage, lo: usize, len: usize, cands: &mut Candidates) {
+        for at in (lo..lo + len).step_by(STRETCH) {
+            let m = (lo + len - at).min(STRETCH);
+            let (rays, values) = (&img.rays[at..at + m], &img.values[at..at + m]);
+            let (mask, solid) = (&img.mask[at..at + m], &img.solid[at..at + m]);
+            let mut keep = [false; STRETCH];
+            for (kp, ((p, &v), &k)) in keep.iter_mut().zip(rays.iter().zip(values).zip(mask)) {
+                *kp = self.passes(*p, v & k);
+            }
+            let start = cands.len();
+            cands.rays.resize(start + m, [0.0; 3]);
+            cands.values.resize(start + m, 0);
+            cands.solid.resize(start + m, 0.0);
+            let mut end = start;
+            for j in 0..m {
+                cands.rays[end] = rays[j];
+                cands.values[end] = values[j];
+                cands.solid[end] = solid[j];
+                end += keep[j] as usize;
+            }
+            cands.truncate(end);
+        }
+    }
+
+    #[inline(always)]
+    fn passes(&self, p: [f32; 3], value: u8) -> bool {
+        let (nf, vf) = (self.nf, self.vf);
+        let d = (nf[0] * p[0] + nf[1] * p[1] + nf[2] * p[2]).abs();
+        let a = vf[0] * p[0] + vf[1] * p[1] + vf[2] * p[2];
+        let in_wedge =
+            !self.wedge | (d < self.s_foot * (1.0 - a * a).max(0.0).sqrt() + self.s_margin);
+        (value > self.background) & (d < self.s_band) & in_wedge
+    }
+}
+
+/// Writes into `out` the image-row stretches (first pixel, length) of the tiles whose cone of
+/// rays meets the band of `nf` (half-width `foot_band` + `margin`, or with a vanishing point
+/// `vf` the wedge `foot_band`·sin(angle from `vf`) + `margin`, radians), in the tiles' order.
+fn band_stretches(
+    t: &Tiles,
+    nf: &[f32; 3],
+    vf: Option<&[f32; 3]>,
+    foot_band: f64,
+    margin: f64,
+    out: &mut Vec<(u32, u32)>,
+) {
+    out.clear();
+    let (foot, margin) = (foot_band as f32, margin as f32);
+    for tile in &t.list {
+        let ct = tile.centre;
+        let d = (nf[0] * ct[0] + nf[1] * ct[1] + nf[2] * ct[2]).abs();
+        // The widest the band gets over the tile.
+        let band = if let Some(vf) = vf {
+            let a = vf[0] * ct[0] + vf[1] * ct[1] + vf[2] * ct[2];
+            let c = ((1.0 - a * a).max(0.0).sqrt() + tile.radius).min(1.0);
+            foot * c + margin
+        } else {
+            foot + margin
+        };
+        let reach = (band + tile.radius).min(std::f32::consts::FRAC_PI_2);
+        if d > reach.sin() {
+            continue;
+        }
+        let (r0, c0) = (tile.r0 as usize, tile.c0 as usize);
+        let cols = ((c0 + t.size).min(t.width) - c0) as u32;
+        for r in r0..(r0 + t.size).min(t.height) {
+            out.push(((r * t.width + c0) as u32, cols));
+        }
+    }
+}
+
+/// How many stretches ahead [`collect_candidates`] asks for the next one's pixels.
+const PREFETCH_AHEAD: usize = 4;
 
 /// Writes into `cands` the pixels above the background within the band of `n`: half-width
 /// `foot_band` + `margin`, or with a vanishing point `vp` the wedge `foot_band`·sin(angle
@@ -865,71 +961,49 @@ fn collect_candidates(
     let t = img.tiles;
     let nf = to_f32(n);
     let vf = vp.map_or([0f32; 3], to_f32);
-    let s_band = (foot_band + margin).min(1.5).sin() as f32;
-    let (s_foot, s_margin) = (foot_band.min(1.5).sin() as f32, margin.sin() as f32);
-    let (foot, margin) = (foot_band as f32, margin as f32);
-    for tile in &t.list {
-        let ct = tile.centre;
-        let d = (nf[0] * ct[0] + nf[1] * ct[1] + nf[2] * ct[2]).abs();
-        // The widest the band gets over the tile.
-        let band = if vp.is_some() {
-            let a = vf[0] * ct[0] + vf[1] * ct[1] + vf[2] * ct[2];
-            let c = ((1.0 - a * a).max(0.0).sqrt() + tile.radius).min(1.0);
-            foot * c + margin
-        } else {
-            foot + margin
-        };
-        let reach = (band + tile.radius).min(std::f32::consts::FRAC_PI_2);
-        if d > reach.sin() {
+    let test = PixelTest {
+        nf,
+        vf,
+        wedge,
+        background,
+        s_band: (foot_band + margin).min(1.5).sin() as f32,
+        s_foot: foot_band.min(1.5).sin() as f32,
+        s_margin: margin.sin() as f32,
+    };
+    band_stretches(
+        t,
+        &nf,
+        vp.map(|_| &vf),
+        foot_band,
+        margin,
+        &mut cands.stretches,
+    );
+    // Each stretch lies an image row from the last, too far apart for the hardware's
+    // prefetchers: the stretch a few ahead is asked for explicitly.
+    let stretches = std::mem::take(&mut cands.stretches);
+    let ahead = |(lo, cols): (u32, u32)| {
+        let (lo, cols) = (lo as usize, cols as usize);
+        prefetch(&img.values[lo..lo + cols]);
+        prefetch(&img.mask[lo..lo + cols]);
+        prefetch(&img.rays[lo..lo + cols]);
+        prefetch(&img.solid[lo..lo + cols]);
+    };
+    for &s in stretches.iter().take(PREFETCH_AHEAD) {
+        ahead(s);
+    }
+    for (k, &(lo, cols)) in stretches.iter().enumerate() {
+        if let Some(&s) = stretches.get(k + PREFETCH_AHEAD) {
+            ahead(s);
+        }
+        let (lo, cols) = (lo as usize, cols as usize);
+        // A stretch of background (between plants) costs no rays' reads.
+        let (vals, mask) = (&img.values[lo..lo + cols], &img.mask[lo..lo + cols]);
+        if vals.iter().zip(mask).fold(0u8, |m, (&v, &k)| m.max(v & k)) <= background {
             continue;
         }
-        let (r0, c0) = (tile.r0 as usize, tile.c0 as usize);
-        let cols = (c0 + t.size).min(t.width) - c0;
-        let r_end = (r0 + t.size).min(t.height);
-        // Each stretch lies an image row from the last, too far apart for the hardware's
-        // prefetchers: the stretches a few rows ahead are asked for explicitly.
-        let ahead = |r: usize| {
-            if r < r_end {
-                let lo = r * t.width + c0;
-                prefetch(&img.values[lo..lo + cols]);
-                prefetch(&img.mask[lo..lo + cols]);
-                prefetch(&img.rays[lo..lo + cols]);
-                prefetch(&img.solid[lo..lo + cols]);
-            }
-        };
-        for r in r0..r0 + PREFETCH_ROWS {
-            ahead(r);
-        }
-        for r in r0..r_end {
-            ahead(r + PREFETCH_ROWS);
-            let lo = r * t.width + c0;
-            // A stretch of background (between plants) costs no rays' reads.
-            let (vals, mask) = (&img.values[lo..lo + cols], &img.mask[lo..lo + cols]);
-            if vals.iter().zip(mask).fold(0u8, |m, (&v, &k)| m.max(v & k)) <= background {
-                continue;
-            }
-            // Every pixel of the tile's row is written and the end moves past the ones kept:
-            // at a plant's edge whether a pixel is in changes from pixel to pixel, and
-            // branches on it mispredicted.
-            let len = cands.len();
-            cands.rays.resize(len + cols, [0.0; 3]);
-            cands.values.resize(len + cols, 0);
-            cands.solid.resize(len + cols, 0.0);
-            let mut k = len;
-            for i in lo..lo + cols {
-                let p = img.rays[i];
-                let above = img.values[i] & img.mask[i] > background;
-                let d = (nf[0] * p[0] + nf[1] * p[1] + nf[2] * p[2]).abs();
-                let a = vf[0] * p[0] + vf[1] * p[1] + vf[2] * p[2];
-                let in_wedge = !wedge | (d < s_foot * (1.0 - a * a).max(0.0).sqrt() + s_margin);
-                cands.rays[k] = p;
-                cands.values[k] = img.values[i];
-                cands.solid[k] = img.solid[i];
-                k += (above & (d < s_band) & in_wedge) as usize;
-            }
-            cands.truncate(k);
-        }
+        test.collect(img, lo, cols, cands);
     }
+    cands.stretches = stretches;
     if along {
         cands
             .along
