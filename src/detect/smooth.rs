@@ -6,6 +6,7 @@
 //! once the caller's buffers have their size.
 
 use super::DetectError;
+use multiversion::multiversion;
 use serde::{Deserialize, Serialize};
 
 /// Options of the Gaussian filter.
@@ -92,87 +93,102 @@ impl Gaussian {
             return Ok(());
         }
         tmp.resize(n, 0);
-        let r = self.radius;
-        let kw16 = |j: usize| self.kernel[j] as u16;
-        const CHUNK: usize = 256;
-        // Horizontal pass.
-        let border = |srow: &[u8], x: usize| -> u8 {
-            let mut acc = 128u32;
-            for (j, &kw) in self.kernel.iter().enumerate() {
-                let xx = (x as isize + j as isize - r as isize).clamp(0, width as isize - 1);
-                acc += kw * srow[xx as usize] as u32;
-            }
-            (acc >> 8).min(255) as u8
-        };
-        for (srow, trow) in src.chunks_exact(width).zip(tmp.chunks_exact_mut(width)) {
-            if width <= 2 * r {
-                for (x, t) in trow.iter_mut().enumerate() {
-                    *t = border(srow, x);
-                }
-                continue;
-            }
-            for (x, t) in trow.iter_mut().enumerate().take(r) {
-                *t = border(srow, x);
-            }
-            for (x, t) in trow.iter_mut().enumerate().skip(width - r) {
-                *t = border(srow, x);
-            }
-            let mut x0 = r;
-            while x0 < width - r {
-                let len = CHUNK.min(width - r - x0);
-                let mut acc = [128u16; CHUNK];
-                let acc = &mut acc[..len];
-                // The kernel is symmetric: each pair of taps is one multiply (the same sums).
-                for j in 0..r {
-                    let w = kw16(j);
-                    let s1 = &srow[x0 - r + j..x0 - r + j + len];
-                    let s2 = &srow[x0 + r - j..x0 + r - j + len];
-                    for ((a, &u), &v) in acc.iter_mut().zip(s1).zip(s2) {
-                        *a += w * (u as u16 + v as u16);
-                    }
-                }
-                let w = kw16(r);
-                for (a, &v) in acc.iter_mut().zip(&srow[x0..x0 + len]) {
-                    *a += w * v as u16;
-                }
-                for (t, &a) in trow[x0..x0 + len].iter_mut().zip(acc.iter()) {
-                    *t = (a >> 8) as u8;
-                }
-                x0 += len;
-            }
-        }
-        // Vertical pass.
-        for y in 0..height {
-            let drow = &mut dst[y * width..(y + 1) * width];
-            let mut x0 = 0;
-            while x0 < width {
-                let len = CHUNK.min(width - x0);
-                let mut acc = [128u16; CHUNK];
-                let acc = &mut acc[..len];
-                let row = |j: usize| {
-                    let yy = (y as isize + j as isize - r as isize).clamp(0, height as isize - 1)
-                        as usize;
-                    &tmp[yy * width + x0..yy * width + x0 + len]
-                };
-                for j in 0..r {
-                    let w = kw16(j);
-                    for ((a, &u), &v) in acc.iter_mut().zip(row(j)).zip(row(2 * r - j)) {
-                        *a += w * (u as u16 + v as u16);
-                    }
-                }
-                let w = kw16(r);
-                for (a, &t) in acc.iter_mut().zip(row(r)) {
-                    *a += w * t as u16;
-                }
-                for (d, &a) in drow[x0..x0 + len].iter_mut().zip(acc.iter()) {
-                    *d = (a >> 8) as u8;
-                }
-                x0 += len;
-            }
-        }
+        horizontal(&self.kernel, src, width, tmp);
+        vertical(&self.kernel, tmp, width, height, dst);
         Ok(())
     }
 }
+
+/// The horizontal pass of [`Gaussian::apply`] (`kernel`: 2·radius + 1 weights summing to
+/// 256): each row of `src` smoothed along itself into `tmp`, borders replicated.
+#[multiversion(targets("x86_64+avx2"))]
+fn horizontal(kernel: &[u32], src: &[u8], width: usize, tmp: &mut [u8]) {
+    let r = kernel.len() / 2;
+    let kw16 = |j: usize| kernel[j] as u16;
+    let border = |srow: &[u8], x: usize| -> u8 {
+        let mut acc = 128u32;
+        for (j, &kw) in kernel.iter().enumerate() {
+            let xx = (x as isize + j as isize - r as isize).clamp(0, width as isize - 1);
+            acc += kw * srow[xx as usize] as u32;
+        }
+        (acc >> 8).min(255) as u8
+    };
+    for (srow, trow) in src.chunks_exact(width).zip(tmp.chunks_exact_mut(width)) {
+        if width <= 2 * r {
+            for (x, t) in trow.iter_mut().enumerate() {
+                *t = border(srow, x);
+            }
+            continue;
+        }
+        for (x, t) in trow.iter_mut().enumerate().take(r) {
+            *t = border(srow, x);
+        }
+        for (x, t) in trow.iter_mut().enumerate().skip(width - r) {
+            *t = border(srow, x);
+        }
+        let mut x0 = r;
+        while x0 < width - r {
+            let len = CHUNK.min(width - r - x0);
+            let mut acc = [128u16; CHUNK];
+            let acc = &mut acc[..len];
+            // The kernel is symmetric: each pair of taps is one multiply (the same sums).
+            for j in 0..r {
+                let w = kw16(j);
+                let s1 = &srow[x0 - r + j..x0 - r + j + len];
+                let s2 = &srow[x0 + r - j..x0 + r - j + len];
+                for ((a, &u), &v) in acc.iter_mut().zip(s1).zip(s2) {
+                    *a += w * (u as u16 + v as u16);
+                }
+            }
+            let w = kw16(r);
+            for (a, &v) in acc.iter_mut().zip(&srow[x0..x0 + len]) {
+                *a += w * v as u16;
+            }
+            for (t, &a) in trow[x0..x0 + len].iter_mut().zip(acc.iter()) {
+                *t = (a >> 8) as u8;
+            }
+            x0 += len;
+        }
+    }
+}
+
+/// The vertical pass of [`Gaussian::apply`]: the columns of `tmp` smoothed into `dst`.
+#[multiversion(targets("x86_64+avx2"))]
+fn vertical(kernel: &[u32], tmp: &[u8], width: usize, height: usize, dst: &mut [u8]) {
+    let r = kernel.len() / 2;
+    let kw16 = |j: usize| kernel[j] as u16;
+    for y in 0..height {
+        let drow = &mut dst[y * width..(y + 1) * width];
+        let mut x0 = 0;
+        while x0 < width {
+            let len = CHUNK.min(width - x0);
+            let mut acc = [128u16; CHUNK];
+            let acc = &mut acc[..len];
+            let row = |j: usize| {
+                let yy =
+                    (y as isize + j as isize - r as isize).clamp(0, height as isize - 1) as usize;
+                &tmp[yy * width + x0..yy * width + x0 + len]
+            };
+            for j in 0..r {
+                let w = kw16(j);
+                for ((a, &u), &v) in acc.iter_mut().zip(row(j)).zip(row(2 * r - j)) {
+                    *a += w * (u as u16 + v as u16);
+                }
+            }
+            let w = kw16(r);
+            for (a, &t) in acc.iter_mut().zip(row(r)) {
+                *a += w * t as u16;
+            }
+            for (d, &a) in drow[x0..x0 + len].iter_mut().zip(acc.iter()) {
+                *d = (a >> 8) as u8;
+            }
+            x0 += len;
+        }
+    }
+}
+
+/// Pixels per run of the passes' 16-bit sums.
+const CHUNK: usize = 256;
 
 #[cfg(test)]
 mod tests {

@@ -11,6 +11,7 @@
 
 use super::{DetectError, GreyImage};
 use crate::frame::{ImageView, PixelFormat};
+use multiversion::multiversion;
 use serde::{Deserialize, Serialize};
 
 /// Which index turns colour into vegetation.
@@ -193,6 +194,7 @@ pub fn vegetation_image(
 
 /// Mono8 input binned 2×2: column pairs of the two rows summed first (contiguous,
 /// vectorised), then the pairs of sums, in runs that fit a stack buffer.
+#[multiversion(targets("x86_64+avx2"))]
 fn mono_binned(d: &[u8], w: usize, ow: usize, oh: usize, out: &mut [u8]) {
     const RUN: usize = 256;
     let mut sums = [0u16; 2 * RUN];
@@ -229,6 +231,7 @@ enum Colour {
 
 /// The vegetation index `f` (R, 2G, B → byte) of colour input (`w` wide, `oh` output rows)
 /// into `out`: RGB pixel by pixel or binned 2×2, Bayer by quads.
+#[multiversion(targets("x86_64+avx2"))]
 fn colour(
     layout: Colour,
     d: &[u8],
