@@ -14,6 +14,7 @@ use super::{DetectError, Row};
 use crate::camera::OcamModel;
 use crate::memory::prefetch;
 use crate::sphere::{any_perpendicular, canonical, Fit, Scatter};
+use multiversion::multiversion;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
@@ -859,34 +860,6 @@ struct PixelTest {
 const STRETCH: usize = 16;
 
 impl PixelTest {
-    /// Appends to `cands` the pixels `lo..lo + len` that pass. Each run of up to [`STRETCH`]
-    /// pixels is tested first, all lanes alike (so that the tests vectorise), then every
-    /// pixel is written and the end moves past the ones kept: at a plant's edge whether a
-    /// pixel is in changes from pixel to pixel, and branches on it mispredicted.
-    fn collect(&self, img: &RefitImage, lo: usize, len: usize, cands: &mut Candidates) {
-        for at in (lo..lo + len).step_by(STRETCH) {
-            let m = (lo + len - at).min(STRETCH);
-            let (rays, values) = (&img.rays[at..at + m], &img.values[at..at + m]);
-            let (mask, solid) = (&img.mask[at..at + m], &img.solid[at..at + m]);
-            let mut keep = [false; STRETCH];
-            for (kp, ((p, &v), &k)) in keep.iter_mut().zip(rays.iter().zip(values).zip(mask)) {
-                *kp = self.passes(*p, v & k);
-            }
-            let start = cands.len();
-            cands.rays.resize(start + m, [0.0; 3]);
-            cands.values.resize(start + m, 0);
-            cands.solid.resize(start + m, 0.0);
-            let mut end = start;
-            for j in 0..m {
-                cands.rays[end] = rays[j];
-                cands.values[end] = values[j];
-                cands.solid[end] = solid[j];
-                end += keep[j] as usize;
-            }
-            cands.truncate(end);
-        }
-    }
-
     #[inline(always)]
     fn passes(&self, p: [f32; 3], value: u8) -> bool {
         let (nf, vf) = (self.nf, self.vf);
@@ -931,6 +904,42 @@ fn band_stretches(
         for r in r0..(r0 + t.size).min(t.height) {
             out.push(((r * t.width + c0) as u32, cols));
         }
+    }
+}
+
+/// Appends to `cands` the pixels `lo..lo + len` that pass `test`. Each run of up to [`STRETCH`]
+/// pixels is tested first, all lanes alike (so that the tests vectorise), then every
+/// pixel is written and the end moves past the ones kept: at a plant's edge whether a
+/// pixel is in changes from pixel to pixel, and branches on it mispredicted. Compiled also
+/// for AVX2, chosen at run time (the same tests).
+#[multiversion(targets("x86_64+avx2"))]
+fn collect_pixels(
+    test: &PixelTest,
+    img: &RefitImage,
+    lo: usize,
+    len: usize,
+    cands: &mut Candidates,
+) {
+    for at in (lo..lo + len).step_by(STRETCH) {
+        let m = (lo + len - at).min(STRETCH);
+        let (rays, values) = (&img.rays[at..at + m], &img.values[at..at + m]);
+        let (mask, solid) = (&img.mask[at..at + m], &img.solid[at..at + m]);
+        let mut keep = [false; STRETCH];
+        for (kp, ((p, &v), &k)) in keep.iter_mut().zip(rays.iter().zip(values).zip(mask)) {
+            *kp = test.passes(*p, v & k);
+        }
+        let start = cands.len();
+        cands.rays.resize(start + m, [0.0; 3]);
+        cands.values.resize(start + m, 0);
+        cands.solid.resize(start + m, 0.0);
+        let mut end = start;
+        for j in 0..m {
+            cands.rays[end] = rays[j];
+            cands.values[end] = values[j];
+            cands.solid[end] = solid[j];
+            end += keep[j] as usize;
+        }
+        cands.truncate(end);
     }
 }
 
@@ -1001,7 +1010,7 @@ fn collect_candidates(
         if vals.iter().zip(mask).fold(0u8, |m, (&v, &k)| m.max(v & k)) <= background {
             continue;
         }
-        test.collect(img, lo, cols, cands);
+        collect_pixels(&test, img, lo, cols, cands);
     }
     cands.stretches = stretches;
     if along {

@@ -8,6 +8,7 @@
 //! allocate.
 
 use super::EdgeError;
+use multiversion::multiversion;
 use serde::{Deserialize, Serialize};
 
 /// How the hysteresis thresholds are given.
@@ -338,6 +339,7 @@ fn gaussian_kernel(sigma: f64) -> Vec<u16> {
 /// Separable Gaussian with replicated borders, in 16-bit fixed point (so that it vectorises
 /// on plain SSE2): for each output row a vertical pass into `row` (rounded to 8 bits), then a
 /// horizontal pass into `out`.
+#[multiversion(targets("x86_64+avx2"))]
 fn gaussian(
     input: &[u8],
     width: usize,
@@ -418,6 +420,7 @@ fn row_span(m: &[u8]) -> (usize, usize) {
 /// (0: across columns, 1: across rows, 2: the anti-diagonal, 3: the diagonal). The border
 /// is zero. Computed only within one pixel of the mask (`spans`, per row), which is all that
 /// non-maximum suppression inside the mask reads; elsewhere `grad` keeps older values.
+#[multiversion(targets("x86_64+avx2"))]
 fn sobel(src: &[u8], width: usize, height: usize, spans: &[(usize, usize)], grad: &mut [u16]) {
     grad[..width].fill(0);
     grad[(height - 1) * width..].fill(0);
@@ -485,6 +488,7 @@ const TAN_22_5: f32 = 0.414_213_57;
 const TAN_67_5: f32 = 2.414_213_6;
 
 /// Non-maximum suppression inside the mask, then hysteresis. Returns the number of edges.
+#[multiversion(targets("x86_64+avx2"))]
 #[allow(clippy::too_many_arguments)]
 fn nms_hysteresis(
     grad: &[u16],
