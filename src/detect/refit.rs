@@ -856,7 +856,7 @@ struct PixelTest {
     s_margin: f32,
 }
 
-/// The pixels of an image row's stretch [`PixelTest::collect`] tests at once.
+/// The pixels of an image row's stretch [`collect_pixels`] tests at once.
 const STRETCH: usize = 16;
 
 impl PixelTest {
