@@ -496,10 +496,11 @@ fn refit_row(
         keep_full_sections(img, &n, foot_band, margin, wedge, cands);
     }
     let candidates = &*cands;
+    let (s_band, s_foot, s_margin) = band_sines(foot_band, margin);
     let band = Band {
-        s_band: (foot_band + margin).min(1.5).sin() as f32,
-        s_foot: foot_band.min(1.5).sin() as f32,
-        s_margin: margin.sin() as f32,
+        s_band,
+        s_foot,
+        s_margin,
         wedge: wedge.map(|v| [v.x as f32, v.y as f32, v.z as f32]),
         cap: plateau_cap(&candidates.values, img.background, opts.plateau_cap),
     };
@@ -622,6 +623,17 @@ impl Band {
         let nf = to_f32(n);
         (0..candidates.len()).filter_map(move |k| self.read(img, candidates, &nf, k))
     }
+}
+
+/// The sines a band of half-width `foot_band` + `margin` (radians), or the wedge
+/// `foot_band`·sin + `margin`, is tested with: (`s_band`, `s_foot`, `s_margin`) of [`Band`]
+/// and [`PixelTest`].
+fn band_sines(foot_band: f64, margin: f64) -> (f32, f32, f32) {
+    (
+        (foot_band + margin).min(1.5).sin() as f32,
+        foot_band.min(1.5).sin() as f32,
+        margin.sin() as f32,
+    )
 }
 
 /// A ray in double precision.
@@ -970,14 +982,15 @@ fn collect_candidates(
     let t = img.tiles;
     let nf = to_f32(n);
     let vf = vp.map_or([0f32; 3], to_f32);
+    let (s_band, s_foot, s_margin) = band_sines(foot_band, margin);
     let test = PixelTest {
         nf,
         vf,
         wedge,
         background,
-        s_band: (foot_band + margin).min(1.5).sin() as f32,
-        s_foot: foot_band.min(1.5).sin() as f32,
-        s_margin: margin.sin() as f32,
+        s_band,
+        s_foot,
+        s_margin,
     };
     band_stretches(
         t,
