@@ -23,6 +23,7 @@
 use super::pose::RobotAxes;
 use super::{DetectError, Method, Row};
 use crate::camera::Mounting;
+use multiversion::multiversion;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
@@ -278,17 +279,8 @@ struct Peak {
     strip: u32,
 }
 
-/// A peak seen from a candidate vanishing point: its u, the kernel's width in u, its weight
-/// and strip.
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct Seen {
-    u: f64,
-    s: f64,
-    w: f64,
-    strip: u32,
-}
-
-/// Peaks seen from a candidate in columns (u, s², weight, strip), sorted by u.
+/// The peaks seen from a candidate vanishing point, in columns sorted by u: u, the square
+/// of the kernel's width in u, weight and strip.
 #[derive(Debug, Clone, Default)]
 struct SeenColumns {
     u: Vec<f64>,
@@ -298,55 +290,91 @@ struct SeenColumns {
 }
 
 impl SeenColumns {
-    fn fill(&mut self, seen: &[Seen]) {
+    fn clear(&mut self) {
         self.u.clear();
         self.s2.clear();
         self.w.clear();
         self.strip.clear();
-        for x in seen {
-            self.u.push(x.u);
-            self.s2.push(x.s * x.s);
-            self.w.push(x.w);
-            self.strip.push(x.strip);
-        }
     }
 
-    /// Σ over the peaks `i+1..end` of wⱼ·K(Δu / √(sᵢ² + sⱼ²)) for those from another strip
-    /// than peak `i`; K the triweight kernel with a standard deviation of 1. Branch-free in
-    /// four lanes: a pair outside the kernel's support or within one strip adds zero.
-    fn pairs(&self, i: usize, end: usize) -> f64 {
-        let (xu, xs2, xstrip) = (self.u[i], self.s2[i], self.strip[i]);
-        let r = i + 1..end;
-        let (u, s2, w, st) = (
-            &self.u[r.clone()],
-            &self.s2[r.clone()],
-            &self.w[r.clone()],
-            &self.strip[r],
-        );
-        let term = |u: f64, s2: f64, w: f64, st: u32| {
-            let du = u - xu;
-            let k = 1.0 - du * du / (9.0 * (xs2 + s2));
-            let k = if k > 0.0 { k } else { 0.0 };
-            let w = if st != xstrip { w } else { 0.0 };
-            w * k * k * k
-        };
-        let mut acc = [0.0f64; 4];
-        let lanes = u
-            .chunks_exact(4)
-            .zip(s2.chunks_exact(4))
-            .zip(w.chunks_exact(4))
-            .zip(st.chunks_exact(4));
-        for (((u, s2), w), st) in lanes {
-            for l in 0..4 {
-                acc[l] += term(u[l], s2[l], w[l], st[l]);
-            }
-        }
-        let full = u.len() / 4 * 4;
-        for j in full..u.len() {
-            acc[0] += term(u[j], s2[j], w[j], st[j]);
-        }
-        (acc[0] + acc[1]) + (acc[2] + acc[3])
+    fn push(&mut self, u: f64, s: f64, w: f64, strip: u32) {
+        self.u.push(u);
+        self.s2.push(s * s);
+        self.w.push(w);
+        self.strip.push(strip);
     }
+
+    fn len(&self) -> usize {
+        self.u.len()
+    }
+
+    /// The peaks within `band` of `u`.
+    fn within(&self, u: f64, band: f64) -> std::ops::Range<usize> {
+        let lo = self.u.partition_point(|&x| x < u - band);
+        let hi = self.u.partition_point(|&x| x <= u + band);
+        lo..hi
+    }
+
+    /// Σ over the pairs of peaks from different strips of wᵢwⱼ·K(Δu / √(sᵢ² + sⱼ²)) and the
+    /// peaks' total weight; K the triweight kernel with a standard deviation of 1.
+    fn pair_sum(&self) -> (f64, f64) {
+        pair_sum(&self.u, &self.s2, &self.w, &self.strip)
+    }
+}
+
+/// [`SeenColumns::pair_sum`] on the columns. Compiled also for AVX2 (four lanes in one
+/// register), chosen at run time; the same operations in the same order either way.
+#[multiversion(targets("x86_64+avx2"))]
+fn pair_sum(u: &[f64], s2: &[f64], w: &[f64], strip: &[u32]) -> (f64, f64) {
+    let s2_max = s2.iter().fold(0.0f64, |m, &x| m.max(x));
+    let (mut num, mut total) = (0.0, 0.0);
+    let mut end = 0;
+    for i in 0..u.len() {
+        let (xu, xs2, xw) = (u[i], s2[i], w[i]);
+        total += xw;
+        // every pair within the kernel's support lies before `end` (a pair beyond the
+        // support adds an exact zero, so `end` only has to be far enough)
+        let reach = 3.0 * (xs2 + s2_max).sqrt();
+        end = end.max(i + 1);
+        while end < u.len() && u[end] - xu <= reach {
+            end += 1;
+        }
+        num += xw * pairs(u, s2, w, strip, i, end);
+    }
+    (num, total)
+}
+
+/// Σ over the peaks `i+1..end` of wⱼ·K(Δu / √(sᵢ² + sⱼ²)) for those from another strip
+/// than peak `i`; K the triweight kernel with a standard deviation of 1. Branch-free in
+/// four lanes: a pair outside the kernel's support or within one strip adds zero.
+#[inline(always)]
+fn pairs(u: &[f64], s2: &[f64], w: &[f64], strip: &[u32], i: usize, end: usize) -> f64 {
+    let (xu, xs2, xstrip) = (u[i], s2[i], strip[i]);
+    let r = i + 1..end;
+    let (u, s2, w, st) = (&u[r.clone()], &s2[r.clone()], &w[r.clone()], &strip[r]);
+    let term = |u: f64, s2: f64, w: f64, st: u32| {
+        let du = u - xu;
+        let k = 1.0 - du * du / (9.0 * (xs2 + s2));
+        let k = if k > 0.0 { k } else { 0.0 };
+        let w = if st != xstrip { w } else { 0.0 };
+        w * k * k * k
+    };
+    let mut acc = [0.0f64; 4];
+    let lanes = u
+        .chunks_exact(4)
+        .zip(s2.chunks_exact(4))
+        .zip(w.chunks_exact(4))
+        .zip(st.chunks_exact(4));
+    for (((u, s2), w), st) in lanes {
+        for l in 0..4 {
+            acc[l] += term(u[l], s2[l], w[l], st[l]);
+        }
+    }
+    let full = u.len() / 4 * 4;
+    for j in full..u.len() {
+        acc[0] += term(u[j], s2[j], w[j], st[j]);
+    }
+    (acc[0] + acc[1]) + (acc[2] + acc[3])
 }
 
 /// The strips method's state: the virtual image's frame, its search window and the
@@ -372,11 +400,9 @@ pub struct StripsRows {
     /// The prior's vanishing point (unit) and window half-angle, when narrowed.
     prior: Option<(Vector3<f64>, f64)>,
     starts: Vec<(f64, f64, f64)>,
-    seen: Vec<Seen>,
-    /// `seen` in columns, for the agreement's pair sums and the comb's Fourier sums.
+    /// The peaks below the last candidate, for the agreement's pair sums and the comb.
     columns: SeenColumns,
-    /// The peaks below a candidate before sorting, and their sort keys.
-    unsorted: Vec<Seen>,
+    /// The sort keys of the peaks below a candidate (u, then the peak's index).
     keys: Vec<u64>,
     /// The comb's teeth that are rows: u, weight and the number of peaks on them.
     teeth: Vec<[f64; 3]>,
@@ -456,9 +482,7 @@ impl StripsRows {
             grid: Vec::new(),
             prior: None,
             starts: Vec::new(),
-            seen: Vec::new(),
             columns: SeenColumns::default(),
-            unsorted: Vec::new(),
             keys: Vec::new(),
             teeth: Vec::new(),
             last: StripsResult::default(),
@@ -867,34 +891,25 @@ impl StripsRows {
         o.peak_sigma_px.hypot(o.search_blur * step)
     }
 
-    /// Fills `self.seen` with the peaks below the candidate (a, p), sorted by u; returns the
-    /// share of the peaks' count that is there.
+    /// Fills `self.columns` with the peaks below the candidate (a, p), sorted by u; returns
+    /// the share of the peaks' count that is there.
     fn see(&mut self, a: f64, p: f64, sig: f64) -> f64 {
-        self.unsorted.clear();
-        self.keys.clear();
         let min_d = self.opts.min_depth_px;
-        for k in &self.peaks {
-            let d = k.p - p;
-            if d > min_d {
-                let u = (k.a - a) / d;
-                self.keys.push(sort_key(u, self.unsorted.len()));
-                self.unsorted.push(Seen {
-                    u,
-                    s: sig / d,
-                    w: k.w,
-                    strip: k.strip,
-                });
-            }
-        }
-        // sorting 8-byte keys and gathering is faster than sorting the peaks themselves
+        // the peaks are in the strips' order, deepest last: those below are the last ones
+        let first = self.peaks.partition_point(|k| k.p - p <= min_d);
+        let peaks = &self.peaks;
+        let key = |k: usize| sort_key((peaks[k].a - a) / (peaks[k].p - p), k);
+        self.keys.clear();
+        self.keys.extend((first..peaks.len()).map(key));
+        // sorting 8-byte keys is faster than sorting the peaks themselves
         self.keys.sort_unstable();
-        self.seen.clear();
-        self.seen.extend(
-            self.keys
-                .iter()
-                .map(|&k| self.unsorted[(k & 0xffff_ffff) as usize]),
-        );
-        self.seen.len() as f64 / self.peaks.len().max(1) as f64
+        self.columns.clear();
+        for &k in &self.keys {
+            let k = &peaks[(k & 0xffff_ffff) as usize];
+            let d = k.p - p;
+            self.columns.push((k.a - a) / d, sig / d, k.w, k.strip);
+        }
+        self.columns.len() as f64 / self.peaks.len().max(1) as f64
     }
 
     /// How well the peaks agree in u seen from (a, p): Σ over pairs of peaks from different
@@ -903,39 +918,22 @@ impl StripsRows {
     fn agreement(&mut self, a: f64, p: f64, sig: f64) -> f64 {
         self.last.evaluated += 1;
         let share = self.see(a, p, sig);
-        if self.seen.len() < 4 {
+        if self.columns.len() < 4 {
             return 0.0;
         }
-        let s_max = self.seen.iter().fold(0.0f64, |m, x| m.max(x.s));
-        let c = &mut self.columns;
-        c.fill(&self.seen);
-        let (mut num, mut total) = (0.0, 0.0);
-        let mut end = 0;
-        for i in 0..c.u.len() {
-            let (xu, xs2, xw) = (c.u[i], c.s2[i], c.w[i]);
-            total += xw;
-            // every pair within the kernel's support lies before `end` (a pair beyond the
-            // support adds an exact zero, so `end` only has to be far enough)
-            let reach = 3.0 * (xs2 + s_max * s_max).sqrt();
-            end = end.max(i + 1);
-            while end < c.u.len() && c.u[end] - xu <= reach {
-                end += 1;
-            }
-            num += xw * c.pairs(i, end);
-        }
+        let (num, total) = self.columns.pair_sum();
         if total <= 0.0 {
             return 0.0;
         }
         num / (total * total) * share
     }
 
-    /// The strongest comb of the peaks' u in `self.seen` (filled by `see`): (amplitude,
+    /// The strongest comb of the peaks' u in `self.columns` (filled by `see`): (amplitude,
     /// period, phase), the amplitude their Fourier component's over their total weight.
     /// Periods from `comb_min_period` to `comb_max_period`.
     fn comb(&mut self) -> (f64, f64, f64) {
         let o = &self.opts;
-        let c = &mut self.columns;
-        c.fill(&self.seen);
+        let c = &self.columns;
         let total: f64 = c.w.iter().sum();
         let ratio = (o.comb_max_period / o.comb_min_period).powf(1.0 / (o.comb_periods - 1) as f64);
         let mut period = o.comb_min_period;
@@ -958,7 +956,7 @@ impl StripsRows {
     /// The comb of the peaks' u seen from (a, p) and its teeth as rows into `rows`.
     fn comb_rows(&mut self, a: f64, p: f64, rows: &mut Vec<Row>) {
         self.see(a, p, self.opts.peak_sigma_px);
-        if self.seen.is_empty() {
+        if self.columns.len() == 0 {
             return;
         }
         let o = self.opts;
@@ -966,7 +964,8 @@ impl StripsRows {
         let (amp, period, phase) = best;
         self.last.period = period;
         self.last.comb_strength = amp;
-        let (u0, u1) = (self.seen[0].u, self.seen[self.seen.len() - 1].u);
+        let c = &self.columns;
+        let (u0, u1) = (c.u[0], c.u[c.len() - 1]);
         let k0 = ((u0 - phase) / period).floor() as i64;
         let k1 = ((u1 - phase) / period).ceil() as i64;
         if k1 - k0 > 4096 {
@@ -977,15 +976,16 @@ impl StripsRows {
         for k in k0..=k1 {
             let m = phase + k as f64 * period;
             let band = o.comb_band * period;
-            let on = within(&self.seen, m, band);
-            if distinct_strips(on) >= o.min_strips {
-                let w: f64 = on.iter().map(|x| x.w).sum();
+            let on = c.within(m, band);
+            if distinct_strips(&c.strip[on.clone()]) >= o.min_strips {
+                let w: f64 = c.w[on.clone()].iter().sum();
                 let mut at = m;
                 for _ in 0..o.recentre_rounds {
-                    let on = within(&self.seen, at, band);
-                    let sw: f64 = on.iter().map(|x| x.w).sum();
+                    let on = c.within(at, band);
+                    let sw: f64 = c.w[on.clone()].iter().sum();
                     if sw > 0.0 {
-                        at = on.iter().map(|x| x.w * x.u).sum::<f64>() / sw;
+                        let wu = c.w[on.clone()].iter().zip(&c.u[on]);
+                        at = wu.map(|(w, u)| w * u).sum::<f64>() / sw;
                     }
                 }
                 self.teeth.push([at, w, on.len() as f64]);
@@ -1123,13 +1123,6 @@ pub fn looks_forward(m: &Mounting) -> bool {
     -RobotAxes::new(m).fwd.z >= 0.2
 }
 
-/// The peaks (sorted by u) within `band` of `u`.
-fn within(seen: &[Seen], u: f64, band: f64) -> &[Seen] {
-    let lo = seen.partition_point(|x| x.u < u - band);
-    let hi = seen.partition_point(|x| x.u <= u + band);
-    &seen[lo..hi]
-}
-
 /// How far `sm[i]` stands above the higher of the lowest values within `win` bins on its
 /// left and on its right (the profile's ends bound a side with fewer bins).
 fn prominence(sm: &[f64], i: usize, win: usize) -> f64 {
@@ -1152,11 +1145,11 @@ fn sort_key(u: f64, i: usize) -> u64 {
     ((ordered as u64) << 32) | (i as u64 & 0xffff_ffff)
 }
 
-/// How many different strips the peaks (sorted by u) come from.
-fn distinct_strips(on: &[Seen]) -> usize {
+/// How many different strips the peaks come from.
+fn distinct_strips(on: &[u32]) -> usize {
     let mut n = 0;
     for (i, x) in on.iter().enumerate() {
-        if on[..i].iter().all(|y| y.strip != x.strip) {
+        if on[..i].iter().all(|y| y != x) {
             n += 1;
         }
     }
@@ -1263,6 +1256,23 @@ mod tests {
             .fold(f64::MAX, f64::min)
     }
 
+    /// A peak seen from a candidate: u, the kernel's width in u, weight and strip.
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    struct Seen {
+        u: f64,
+        s: f64,
+        w: f64,
+        strip: u32,
+    }
+
+    fn columns(seen: &[Seen]) -> SeenColumns {
+        let mut c = SeenColumns::default();
+        for x in seen {
+            c.push(x.u, x.s, x.w, x.strip);
+        }
+        c
+    }
+
     #[test]
     fn the_lanes_pair_sum_is_the_pairs_sum_over_the_kernels_support() {
         let mut r = uniform(17);
@@ -1275,8 +1285,8 @@ mod tests {
             })
             .collect();
         seen.sort_by(|x, y| x.u.total_cmp(&y.u));
-        let mut c = SeenColumns::default();
-        c.fill(&seen);
+        let c = columns(&seen);
+        let pairs = |c: &SeenColumns, i, end| pairs(&c.u, &c.s2, &c.w, &c.strip, i, end);
         let direct = |i: usize, end: usize| -> f64 {
             let x = seen[i];
             seen[i + 1..end]
@@ -1291,7 +1301,7 @@ mod tests {
         let mut nonzero = 0;
         for i in 0..seen.len() {
             for end in [seen.len(), (i + 7).min(seen.len())] {
-                let (lanes, want) = (c.pairs(i, end), direct(i, end));
+                let (lanes, want) = (pairs(&c, i, end), direct(i, end));
                 assert!(
                     (lanes - want).abs() <= 1e-12 * (1.0 + want),
                     "{i}: {lanes} {want}"
@@ -1301,14 +1311,14 @@ mod tests {
         }
         assert!(nonzero > 300, "{nonzero}");
         // a pair within one strip adds nothing however close
-        c.fill(&[
+        let c = columns(&[
             seen[0],
             Seen {
                 u: seen[0].u,
                 ..seen[0]
             },
         ]);
-        assert_eq!(c.pairs(0, 2), 0.0);
+        assert_eq!(pairs(&c, 0, 2), 0.0);
     }
 
     #[test]
