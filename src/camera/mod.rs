@@ -13,7 +13,7 @@ mod ocam;
 mod pinhole;
 
 pub use ideal::{ideal_fisheye, ideal_pal, IdealLens, IDEAL_SIDE_PX};
-pub use ocam::{CalibError, OcamModel};
+pub use ocam::{CalibError, OcamModel, MAX_IMAGE_SIDE};
 pub use pinhole::{ConversionError, DistortionModel, Pinhole, PinholeToml};
 
 use nalgebra::{Rotation3, Vector3};

@@ -43,6 +43,11 @@ const SECTIONS: [&str; 5] = [
 /// Number of samples of the monotone rho → theta table used for the numeric inverse.
 const TABLE_SAMPLES: usize = 1024;
 
+/// The largest image side a calibration may name, in pixels. The largest machine-vision
+/// sensors are about 14 000 pixels wide; a side beyond this is a typing error, and a model
+/// checked pixel by pixel over it would take minutes to load.
+pub const MAX_IMAGE_SIDE: u32 = 20_000;
+
 /// Scaramuzza/OCamCalib Taylor camera model.
 #[derive(Debug, Clone, PartialEq)]
 pub struct OcamModel {
@@ -133,6 +138,11 @@ impl OcamModel {
         }
         if height == 0 || width == 0 {
             return Err(format!("image size {height}x{width} is empty"));
+        }
+        if height > MAX_IMAGE_SIDE || width > MAX_IMAGE_SIDE {
+            return Err(format!(
+                "image size {height}x{width} has a side over {MAX_IMAGE_SIDE} pixels"
+            ));
         }
         let mut m = OcamModel {
             ss,
@@ -494,10 +504,12 @@ impl OcamModel {
         let size = exact(4, 2)?;
         let size_line = rows[4].0;
         let dim = |v: f64, what: &str| -> Result<u32, CalibError> {
-            if v.fract() != 0.0 || !(1.0..=100_000.0).contains(&v) {
+            if v.fract() != 0.0 || !(1.0..=MAX_IMAGE_SIDE as f64).contains(&v) {
                 return Err(perr(
                     size_line,
-                    format!("image size: {what} {v} is not a positive whole number of pixels"),
+                    format!(
+                        "image size: {what} {v} is not a whole number of pixels in 1..={MAX_IMAGE_SIDE}"
+                    ),
                 ));
             }
             Ok(v as u32)
@@ -681,6 +693,19 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("bad.txt:5") && e.contains("expected 2"), "{e}");
+        let e = OcamModel::parse("2 -100 0\n1 2\n3 3\n1 0 0\n10 20001\n", p)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("bad.txt:5") && e.contains("width 20001"), "{e}");
+        let big = (MAX_IMAGE_SIDE + 1, 10);
+        let e = OcamModel::new(
+            vec![-100.0, 0.0],
+            vec![1.0],
+            (0.0, 0.0),
+            (1.0, 0.0, 0.0),
+            big,
+        );
+        assert!(e.unwrap_err().contains("over 20000"));
     }
 }
 

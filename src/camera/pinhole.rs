@@ -9,7 +9,10 @@
 //! Taylor counterpart) and the conversion's error in pixels over the image.
 
 use super::ideal::fit_direct;
-use super::{toml_error, CalibError, Calibration, CalibrationToml, FovMask, Mounting, OcamModel};
+use super::{
+    toml_error, CalibError, Calibration, CalibrationToml, FovMask, Mounting, OcamModel,
+    MAX_IMAGE_SIDE,
+};
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -67,6 +70,12 @@ impl Pinhole {
         if self.width == 0 || self.height == 0 {
             return Err(format!(
                 "[pinhole] image size {}x{} is empty",
+                self.width, self.height
+            ));
+        }
+        if self.width > MAX_IMAGE_SIDE || self.height > MAX_IMAGE_SIDE {
+            return Err(format!(
+                "[pinhole] image size {}x{} has a side over {MAX_IMAGE_SIDE} pixels",
                 self.width, self.height
             ));
         }
@@ -415,5 +424,24 @@ mod tests {
         assert!(e.contains("at most 4"), "{e}");
         let p = cam(DistortionModel::PlumbBob, vec![f64::NAN]);
         assert!(p.validate().unwrap_err().contains("not a number"));
+    }
+
+    #[test]
+    fn an_absurd_image_size_is_refused_before_any_work() {
+        // Found by the calibration_toml fuzz target: a height of 666 666 512 pixels parsed,
+        // and checking the model's round trip over it took minutes.
+        let text = "[pinhole]\nwidth = 512\nheight = 666666512\nfx = 300.0\nfy = 600.0\n\
+                    cx = 255.5\ncy = 255.5\n";
+        let e = Calibration::parse_toml(text, Path::new("big.toml")).unwrap_err();
+        let msg = e.to_string();
+        assert!(
+            msg.contains("big.toml") && msg.contains("666666512"),
+            "{msg}"
+        );
+        let mut p = cam(DistortionModel::None, vec![]);
+        p.width = MAX_IMAGE_SIDE;
+        assert!(p.validate().is_ok());
+        p.width = MAX_IMAGE_SIDE + 1;
+        assert!(p.validate().unwrap_err().contains("over 20000"));
     }
 }
