@@ -1,13 +1,10 @@
-//! The ceiling of the CRDLD metric and the classes of a run's misses (issue 13), ignored by
-//! default: `cargo test --release --test crdld_oracle -- --ignored --nocapture`.
+//! The ceiling of the CRDLD metric (issue 13), ignored by default:
+//! `cargo test --release --test crdld_oracle -- --ignored --nocapture`.
 //!
 //! The oracle publishes, for every labelled row, the straight line fitted to it (over the
 //! whole row, and over its near half only) and scores it with `omnirow eval real`'s metric
-//! at f = 300 px. With `OUTCOMES=path/outcomes.jsonl` (a run of `omnirow eval real` on CRDLD
-//! at f = 300 px) it also sorts that run's missed labelled rows into: not found (no published
-//! row within ¼ spacing on half of the row's scan lines), off (within ¼ spacing on 50–90 %
-//! of them; and how many of those miss mostly in the far half), and counts the false rows
-//! inside the labelled band. The images are read from `CRDLD` (a folder), else
+//! at f = 300 px (a run's missed rows are sorted by `omnirow eval real` itself: its
+//! `label_fits`, docs/real.md). The images are read from `CRDLD` (a folder), else
 //! ../shared/real-fields/crdld; the test skips with a message when they are absent.
 use nalgebra::Vector3;
 use omnirow::camera::Calibration;
@@ -88,76 +85,4 @@ fn oracle_and_classes() {
             sc / ns as f64
         );
     }
-    // Classes of the detector's misses from an outcomes.jsonl.
-    let Ok(out) = std::env::var("OUTCOMES") else {
-        return;
-    };
-    let text = std::fs::read_to_string(out).unwrap();
-    let (mut lab, mut notfound, mut off, mut found, mut falses, mut inside) = (0, 0, 0, 0, 0, 0);
-    let mut off_far = 0;
-    for line in text.lines() {
-        let v: serde_json::Value = serde_json::from_str(line).unwrap();
-        let img = v["image"].as_str().unwrap();
-        let name = Path::new(img).file_stem().unwrap().to_str().unwrap();
-        let l = load_labels(&d, name);
-        let rows: Vec<ProjectedRow> = v["rows"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|n| {
-                let a = n.as_array().unwrap();
-                ProjectedRow::project(
-                    &cal,
-                    &Vector3::new(
-                        a[0].as_f64().unwrap(),
-                        a[1].as_f64().unwrap(),
-                        a[2].as_f64().unwrap(),
-                    ),
-                )
-            })
-            .collect();
-        let s = ImageScore::compute(&l, &rows, &opts);
-        let Some(sp) = omnirow::eval::real::score::spacings(&l) else {
-            continue;
-        };
-        lab += s.labelled;
-        found += s.matched;
-        inside += s.inside;
-        falses += s.inside.saturating_sub(s.matched);
-        for (li, c) in l.iter().enumerate() {
-            if s.matches[li].is_some() {
-                continue;
-            }
-            // best within-fraction over published rows, and where the misses lie
-            let mut best = (0.0, 0.0);
-            for p in &rows {
-                let (mut w, mut n, mut wtop) = (0usize, 0usize, 0usize);
-                let npts = c.cols.len();
-                for (k, ([r, col], &g)) in c.points().zip(&sp[li]).enumerate() {
-                    n += 1;
-                    match p.nearest_col(r as usize, col) {
-                        Some(x) if (x - col).abs() <= 0.25 * g => w += 1,
-                        _ => {
-                            if k < npts / 2 {
-                                wtop += 1
-                            }
-                        }
-                    }
-                }
-                let f = w as f64 / n.max(1) as f64;
-                if f > best.0 {
-                    best = (f, wtop as f64 / (n - w).max(1) as f64);
-                }
-            }
-            if best.0 >= 0.5 {
-                off += 1;
-                if best.1 > 0.5 {
-                    off_far += 1;
-                }
-            } else {
-                notfound += 1;
-            }
-        }
-    }
-    println!("labelled {lab} found {found} not-found(<50% lines) {notfound} off(50-90% lines) {off} (of which misses mostly far half {off_far}); inside {inside} false-inside {falses}");
 }

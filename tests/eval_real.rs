@@ -124,7 +124,28 @@ fn scores_synthetic_fields_through_a_pinhole() {
         assert!(v["matched_rows"].as_u64().unwrap() >= labelled - 1, "{v}");
         assert!(v["score"].as_f64().unwrap() > 0.3, "{v}");
         assert!(v["vp_error_px"].as_f64().unwrap() < 20.0, "{v}");
+        // One fit per labelled row, found exactly where a row was matched; a found row is
+        // within tolerance on at least 0.9 of its scan lines and misses on the rest.
+        let fits = v["label_fits"].as_array().unwrap();
+        assert_eq!(fits.len() as u64, labelled, "{v}");
+        let found: Vec<&serde_json::Value> = fits
+            .iter()
+            .filter(|f| f["found"].as_bool().unwrap())
+            .collect();
+        assert_eq!(
+            found.len() as u64,
+            v["matched_rows"].as_u64().unwrap(),
+            "{v}"
+        );
+        for f in found {
+            assert!(f["within"].as_f64().unwrap() >= 0.9, "{f}");
+            assert_eq!(f["misses_top_middle_bottom"].as_array().unwrap().len(), 3);
+        }
     }
+    assert!(
+        md.contains("| under 0.3 | 0.3 to 0.6 | 0.6 and over |"),
+        "{md}"
+    );
     // The two worst images have overlays.
     assert_eq!(std::fs::read_dir(out.join("overlays")).unwrap().count(), 2);
     // Each image as 5 frames through the tracker, the search narrowed by its prediction

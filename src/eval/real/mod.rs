@@ -12,7 +12,7 @@ pub mod score;
 
 pub use labels::{LabelError, MaskTracing, ScanCurve};
 pub use report::{markdown, write, Summary};
-pub use score::{ImageScore, ProjectedRow, ScoreOptions};
+pub use score::{ImageScore, LabelFit, ProjectedRow, ScoreOptions};
 
 use crate::camera::Calibration;
 use crate::detect::{DetectError, Detection, Detector, DetectorOptions, Method};
@@ -83,6 +83,9 @@ pub struct RealOutcome {
     pub rows: Vec<[f64; 3]>,
     /// The vanishing direction, if any.
     pub vanishing_point: Option<[f64; 3]>,
+    /// For each labelled row, how near the published rows came to it (docs/real.md, "Why
+    /// rows are missed").
+    pub label_fits: Vec<LabelFit>,
 }
 
 impl RealOutcome {
@@ -103,6 +106,7 @@ impl RealOutcome {
             detect_ms: 0.0,
             rows: Vec::new(),
             vanishing_point: None,
+            label_fits: Vec::new(),
         }
     }
 }
@@ -318,6 +322,7 @@ fn score_one(
     o.inside_rows = s.inside;
     o.matched_rows = s.matched;
     o.score = s.score;
+    o.label_fits = s.fits;
     o.rows = det
         .rows
         .iter()

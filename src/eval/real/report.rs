@@ -40,6 +40,12 @@ pub struct Summary {
     pub vp_p90_px: f64,
     pub ms_median: f64,
     pub ms_p90: f64,
+    /// Labelled rows not found (of images with a score), by how near the closest published
+    /// row came: within tolerance on under 0.3 of the row's scan lines, 0.3–0.6, and 0.6 up
+    /// to the found fraction ...
+    pub missed: [usize; 3],
+    /// ... and of the last, those whose misses lie mostly in the top, middle, bottom third.
+    pub nearly_missed_where: [usize; 3],
 }
 
 impl Summary {
@@ -56,6 +62,21 @@ impl Summary {
         let inside = ok.iter().map(|o| o.inside_rows).sum();
         let matched = ok.iter().map(|o| o.matched_rows).sum();
         let ratio = |a: usize, b: usize| if b > 0 { a as f64 / b as f64 } else { f64::NAN };
+        let (mut missed, mut nearly_missed_where) = ([0; 3], [0; 3]);
+        let scored_fits = ok.iter().filter(|o| o.score.is_some());
+        for f in scored_fits.flat_map(|o| &o.label_fits).filter(|f| !f.found) {
+            let bin = if f.within < 0.3 {
+                0
+            } else if f.within < 0.6 {
+                1
+            } else {
+                2
+            };
+            missed[bin] += 1;
+            if let (2, Some(t)) = (bin, f.worst_third()) {
+                nearly_missed_where[t] += 1;
+            }
+        }
         Summary {
             images: outcomes.len(),
             errors: outcomes.len() - ok.len(),
@@ -75,6 +96,8 @@ impl Summary {
             vp_p90_px: quantile(&vp, 0.9),
             ms_median: quantile(&ms, 0.5),
             ms_p90: quantile(&ms, 0.9),
+            missed,
+            nearly_missed_where,
         }
     }
 }
@@ -148,6 +171,13 @@ pub fn markdown(r: &RealResults, command: &str, worst_n: usize) -> String {
         "| {} | {:.1} | {:.1} | {:.1} | {:.2} | {:.2} |\n",
         s.vp_n, s.vp_median_px, s.vp_mean_px, s.vp_p90_px, s.ms_median, s.ms_p90
     );
+    let [m0, m1, m2] = s.missed;
+    let [top, middle, bottom] = s.nearly_missed_where;
+    let _ = writeln!(
+        md,
+        "Labelled rows not found, by the share of their scan lines on which the nearest published row lies within tolerance (`label_fits` in outcomes.jsonl; docs/real.md):\n\n| under 0.3 | 0.3 to 0.6 | 0.6 and over | of those, misses mostly in the top third | middle third | bottom third |\n|---|---|---|---|---|---|"
+    );
+    let _ = writeln!(md, "| {m0} | {m1} | {m2} | {top} | {middle} | {bottom} |\n");
     let _ = writeln!(
         md,
         "## The {worst_n} worst images\n\nOverlays in `overlays/`: labelled rows green, published rows in their method's colour, the labels' vanishing point a green cross, the detector's yellow.\n\n| image | score | labelled | found | published in band | published | VP error (px) | error |\n|---|---|---|---|---|---|---|---|"

@@ -200,6 +200,34 @@ pub struct ImageScore {
     pub score: Option<f64>,
     /// For each labelled row, the published row matched to it.
     pub matches: Vec<Option<usize>>,
+    /// For each labelled row, how near the published rows came to it (the matched row, else
+    /// the closest): why a row was not found.
+    pub fits: Vec<LabelFit>,
+}
+
+/// How near the published rows came to one labelled row: the published row matched to it,
+/// else the one within tolerance on the most of its scan lines (docs/real.md, "Why rows are
+/// missed").
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize)]
+pub struct LabelFit {
+    /// The labelled row was found.
+    pub found: bool,
+    /// The fraction of its scan lines on which that published row lies within tolerance (0
+    /// when no row was published).
+    pub within: f64,
+    /// The scan lines where it does not (outside the tolerance or not crossed), in the top,
+    /// middle and bottom third of the labelled row's extent: for a forward-looking camera the
+    /// top third is the far field, towards the vanishing point.
+    pub misses_top_middle_bottom: [usize; 3],
+}
+
+impl LabelFit {
+    /// The third of the row (0 top, 1 middle, 2 bottom) holding most of the misses; `None`
+    /// without misses.
+    pub fn worst_third(&self) -> Option<usize> {
+        let m = self.misses_top_middle_bottom;
+        (m.iter().sum::<usize>() > 0).then(|| (0..3).rev().max_by_key(|&t| m[t]).unwrap_or(0))
+    }
 }
 
 impl ImageScore {
@@ -251,6 +279,7 @@ impl ImageScore {
             }
         }
         s.matched = s.matches.iter().flatten().count();
+        s.fits = fits(labels, rows, &spacing, &pairs, &s.matches, opts);
         // Position score: each labelled row against its best published row, one-to-one.
         pairs.sort_by(|a, b| b.score.total_cmp(&a.score));
         let mut label_done = vec![false; labels.len()];
@@ -270,6 +299,47 @@ impl ImageScore {
         s.score = Some(total / s.labelled.max(s.inside).max(1) as f64);
         s
     }
+}
+
+/// Each labelled row's [`LabelFit`]: its matched row, else the one within tolerance on most
+/// of its scan lines (then the best scored); `pairs` holds every label against every row.
+fn fits(
+    labels: &[ScanCurve],
+    rows: &[ProjectedRow],
+    spacing: &[Vec<f64>],
+    pairs: &[Pair],
+    matches: &[Option<usize>],
+    opts: &ScoreOptions,
+) -> Vec<LabelFit> {
+    let mut out = Vec::with_capacity(labels.len());
+    for (li, (l, sp)) in labels.iter().zip(spacing).enumerate() {
+        let of_label = pairs.iter().filter(|p| p.label == li);
+        let best = match matches[li] {
+            Some(pi) => of_label.clone().find(|p| p.published == pi),
+            None => of_label.max_by(|a, b| {
+                a.within
+                    .total_cmp(&b.within)
+                    .then(a.score.total_cmp(&b.score))
+            }),
+        };
+        let n = l.cols.len();
+        let mut fit = LabelFit {
+            found: matches[li].is_some(),
+            within: best.map_or(0.0, |b| b.within),
+            ..Default::default()
+        };
+        let row = best.map(|b| &rows[b.published]);
+        for (k, ([r, c], &gap)) in l.points().zip(sp).enumerate() {
+            let hit = row
+                .and_then(|p| p.nearest_col(r as usize, c))
+                .is_some_and(|x| (x - c).abs() <= opts.found_tolerance * gap);
+            if !hit {
+                fit.misses_top_middle_bottom[(k * 3 / n.max(1)).min(2)] += 1;
+            }
+        }
+        out.push(fit);
+    }
+    out
 }
 
 /// Whether a published row comes within half a row spacing of the band between the
@@ -415,6 +485,47 @@ mod tests {
         let s = ImageScore::compute(&labels, &extra, &o);
         assert_eq!((s.published, s.inside, s.matched), (5, 4, 3));
         assert!((s.score.unwrap() - 0.75).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_row_through_the_wrong_vanishing_point_misses_at_the_top() {
+        let labels: Vec<ScanCurve> = fan(0.0).into_iter().map(|f| line(50, 200, f)).collect();
+        // The outer rows through a point 12 px right of the labels' vanishing point (row
+        // −100), each through its labelled row's foot on row 199: off by 6 px on row 50,
+        // where the tolerance is ¼ of the 50 px spacing, and exact at the bottom: found.
+        let tilted =
+            |dx: f64| move |r: f64| 150.0 + dx * (r + 100.0) / 299.0 + 12.0 * (199.0 - r) / 299.0;
+        let rows = vec![
+            projected(0, 200, tilted(-100.0)),
+            projected(0, 200, &fan(0.0)[1]),
+            projected(0, 200, tilted(100.0)),
+        ];
+        let s = ImageScore::compute(&labels, &rows, &ScoreOptions::default());
+        assert_eq!(s.matches, vec![Some(0), Some(1), Some(2)]);
+        for f in &s.fits {
+            assert!(
+                f.found && f.within == 1.0 && f.worst_third().is_none(),
+                "{f:?}"
+            );
+        }
+        // Off by 40 px on row 50 and 0 on row 199: beyond the tolerance (¼ of a spacing
+        // growing from 50 to 100 px) above row 128, so missed in the top third and part of
+        // the middle one.
+        let steep =
+            |dx: f64| move |r: f64| 150.0 + dx * (r + 100.0) / 299.0 + 40.0 * (199.0 - r) / 149.0;
+        let rows = vec![
+            projected(0, 200, steep(-100.0)),
+            projected(0, 200, &fan(0.0)[1]),
+        ];
+        let s = ImageScore::compute(&labels, &rows, &ScoreOptions::default());
+        assert_eq!(s.matches, vec![None, Some(1), None]);
+        let f = s.fits[0];
+        assert!(!f.found && (f.within - 72.0 / 150.0).abs() < 1e-12, "{f:?}");
+        assert_eq!(f.misses_top_middle_bottom, [50, 28, 0]);
+        assert_eq!(f.worst_third(), Some(0));
+        // No row near the third label: every scan line is a miss, in equal thirds.
+        assert_eq!(s.fits[2].misses_top_middle_bottom, [50, 50, 50]);
+        assert_eq!(s.fits[2].within, 0.0);
     }
 
     #[test]
