@@ -111,7 +111,7 @@ impl Default for StripsOptions {
             search_coarse_share: 1.0,
             search_blur: 0.0,
             max_heading_deg: 25.0,
-            min_depth_px: 20.0,
+            min_depth_px: 12.0,
             min_strips: 8,
             comb_min_period: 0.075,
             comb_max_period: 0.75,
