@@ -183,6 +183,8 @@ struct Pair {
     within: f64,
     /// Mean row-position score over the labelled scan lines.
     score: f64,
+    /// The labelled scan lines where it is not within tolerance, by third (top first).
+    misses: [usize; 3],
 }
 
 /// One image's scores.
@@ -245,23 +247,28 @@ impl ImageScore {
         let mut pairs = Vec::with_capacity(labels.len() * rows.len());
         for (li, (l, sp)) in labels.iter().zip(&spacing).enumerate() {
             for (pi, p) in rows.iter().enumerate() {
-                let (mut within, mut score) = (0usize, 0.0);
-                for ([r, c], &gap) in l.points().zip(sp) {
+                let (mut within, mut score, mut misses) = (0usize, 0.0, [0usize; 3]);
+                let n = l.cols.len().max(1);
+                for (k, ([r, c], &gap)) in l.points().zip(sp).enumerate() {
+                    let third = (k * 3 / n).min(2);
                     let Some(x) = p.nearest_col(r as usize, c) else {
+                        misses[third] += 1;
                         continue;
                     };
                     let d = (x - c).abs();
                     if d <= opts.found_tolerance * gap {
                         within += 1;
+                    } else {
+                        misses[third] += 1;
                     }
                     score += (1.0 - (d / (opts.sigma * gap)).powi(2)).max(0.0);
                 }
-                let n = l.cols.len().max(1) as f64;
                 pairs.push(Pair {
                     label: li,
                     published: pi,
-                    within: within as f64 / n,
-                    score: score / n,
+                    within: within as f64 / n as f64,
+                    score: score / n as f64,
+                    misses,
                 });
             }
         }
@@ -279,7 +286,7 @@ impl ImageScore {
             }
         }
         s.matched = s.matches.iter().flatten().count();
-        s.fits = fits(labels, rows, &spacing, &pairs, &s.matches, opts);
+        s.fits = fits(labels, &pairs, &s.matches);
         // Position score: each labelled row against its best published row, one-to-one.
         pairs.sort_by(|a, b| b.score.total_cmp(&a.score));
         let mut label_done = vec![false; labels.len()];
@@ -303,16 +310,8 @@ impl ImageScore {
 
 /// Each labelled row's [`LabelFit`]: its matched row, else the one within tolerance on most
 /// of its scan lines (then the best scored); `pairs` holds every label against every row.
-fn fits(
-    labels: &[ScanCurve],
-    rows: &[ProjectedRow],
-    spacing: &[Vec<f64>],
-    pairs: &[Pair],
-    matches: &[Option<usize>],
-    opts: &ScoreOptions,
-) -> Vec<LabelFit> {
-    let mut out = Vec::with_capacity(labels.len());
-    for (li, (l, sp)) in labels.iter().zip(spacing).enumerate() {
+fn fits(labels: &[ScanCurve], pairs: &[Pair], matches: &[Option<usize>]) -> Vec<LabelFit> {
+    let fit = |(li, l): (usize, &ScanCurve)| {
         let of_label = pairs.iter().filter(|p| p.label == li);
         let best = match matches[li] {
             Some(pi) => of_label.clone().find(|p| p.published == pi),
@@ -322,24 +321,16 @@ fn fits(
                     .then(a.score.total_cmp(&b.score))
             }),
         };
+        // with no row published, every scan line is a miss
         let n = l.cols.len();
-        let mut fit = LabelFit {
+        let none = [n.div_ceil(3), (n + 1) / 3, n / 3];
+        LabelFit {
             found: matches[li].is_some(),
             within: best.map_or(0.0, |b| b.within),
-            ..Default::default()
-        };
-        let row = best.map(|b| &rows[b.published]);
-        for (k, ([r, c], &gap)) in l.points().zip(sp).enumerate() {
-            let hit = row
-                .and_then(|p| p.nearest_col(r as usize, c))
-                .is_some_and(|x| (x - c).abs() <= opts.found_tolerance * gap);
-            if !hit {
-                fit.misses_top_middle_bottom[(k * 3 / n.max(1)).min(2)] += 1;
-            }
+            misses_top_middle_bottom: best.map_or(none, |b| b.misses),
         }
-        out.push(fit);
-    }
-    out
+    };
+    labels.iter().enumerate().map(fit).collect()
 }
 
 /// Whether a published row comes within half a row spacing of the band between the
