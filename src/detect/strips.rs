@@ -15,8 +15,9 @@
 //! maximises the agreement of the strips' peaks in u (a kernel sum over pairs from different
 //! strips, each peak's width in u its pixel uncertainty over its depth below the vanishing
 //! point) within the expected heading and tilt; the comb's period and phase then come from
-//! the peaks' u (the strongest Fourier component), and each tooth seen in at least
-//! `min_strips` strips is a row through the vanishing point. Peaks between the teeth (weeds,
+//! the peaks' u (the strongest Fourier component), read on the peaks again with each strip
+//! straightened about that point, and each tooth seen in at least `min_strips` strips (fewer
+//! when its line leaves the image early) is a row through the vanishing point. Peaks between the teeth (weeds,
 //! plant edges, shadows) are not rows. Every length is in pixels of that virtual image, so the
 //! same scene through any focal length gives the same rows.
 
@@ -68,6 +69,12 @@ pub struct StripsOptions {
     pub min_depth_px: f64,
     /// A tooth of the comb is a row when peaks lie on it in at least this many strips.
     pub min_strips: usize,
+    /// A tooth whose line leaves the points early (an outer row leaving the image by its
+    /// side) cannot have peaks in `min_strips` strips: it needs only this share of the
+    /// strips its line crosses inside their points (below `min_depth_px`), rounded up, but
+    /// at least `min_strips_floor` and at most `min_strips`.
+    pub min_strips_share: f64,
+    pub min_strips_floor: usize,
     /// Shortest and longest comb period searched, in u (lateral over depth in the pencil:
     /// row spacing over the camera's height, about).
     pub comb_min_period: f64,
@@ -119,6 +126,8 @@ impl Default for StripsOptions {
             max_heading_deg: 25.0,
             min_depth_px: 12.0,
             min_strips: 8,
+            min_strips_share: 0.8,
+            min_strips_floor: 7,
             comb_min_period: 0.075,
             comb_max_period: 0.75,
             comb_periods: 160,
@@ -224,6 +233,21 @@ impl StripsOptions {
             return bad(&format!(
                 "min_strips = {} must be within 2..=1000",
                 self.min_strips
+            ));
+        }
+        if !(2..=self.min_strips).contains(&self.min_strips_floor) {
+            return bad(&format!(
+                "min_strips_floor = {} must be within 2..=min_strips ({})",
+                self.min_strips_floor, self.min_strips
+            ));
+        }
+        if !(self.min_strips_share.is_finite()
+            && self.min_strips_share > 0.0
+            && self.min_strips_share <= 1.0)
+        {
+            return bad(&format!(
+                "min_strips_share = {} must be within (0, 1]",
+                self.min_strips_share
             ));
         }
         if !(pos(self.comb_min_period)
@@ -427,6 +451,8 @@ pub struct StripsRows {
     keys: Vec<u64>,
     /// The comb's teeth that are rows: u, weight and the number of peaks on them.
     teeth: Vec<[f64; 3]>,
+    /// Each strip's centre (below) and the extent of its points (along from, to).
+    spans: Vec<[f64; 3]>,
     last: StripsResult,
 }
 
@@ -507,6 +533,7 @@ impl StripsRows {
             columns: SeenColumns::default(),
             keys: Vec::new(),
             teeth: Vec::new(),
+            spans: Vec::new(),
             last: StripsResult::default(),
         })
     }
@@ -657,6 +684,16 @@ impl StripsRows {
             }
         }
         self.make_kernel();
+        self.spans.clear();
+        for s in 0..strips {
+            let row = &self.hist[s * bins..(s + 1) * bins];
+            let lo = row.iter().position(|&x| x > 0.0);
+            let hi = row.iter().rposition(|&x| x > 0.0);
+            if let (Some(lo), Some(hi)) = (lo, hi) {
+                let p = p0 + (s as f64 + 0.5) * sh;
+                self.spans.push([p, a0 + lo as f64, a0 + hi as f64 + 1.0]);
+            }
+        }
         for s in 0..strips {
             self.strip_peaks(s, bins, a0, p0 + (s as f64 + 0.5) * sh);
         }
@@ -1029,6 +1066,24 @@ impl StripsRows {
         best
     }
 
+    /// How many strips a tooth at `u` of the pencil through (a, p) needs peaks in to be a row:
+    /// `min_strips_share` of the strips its line crosses inside their points (below
+    /// `min_depth_px`), rounded up, within `min_strips_floor..=min_strips`.
+    fn need(&self, a: f64, p: f64, u: f64) -> usize {
+        let o = &self.opts;
+        let crossed = self
+            .spans
+            .iter()
+            .filter(|&&[sp, lo, hi]| {
+                let d = sp - p;
+                let x = a + u * d;
+                d > o.min_depth_px && (lo..=hi).contains(&x)
+            })
+            .count();
+        let share = (o.min_strips_share * crossed as f64).ceil() as usize;
+        share.clamp(o.min_strips_floor, o.min_strips)
+    }
+
     /// The comb of the peaks' u seen from (a, p) and its teeth as rows into `rows`.
     fn comb_rows(&mut self, a: f64, p: f64, rows: &mut Vec<Row>) {
         self.see(a, p, self.opts.peak_sigma_px);
@@ -1053,7 +1108,8 @@ impl StripsRows {
             let m = phase + k as f64 * period;
             let band = o.comb_band * period;
             let on = c.within(m, band);
-            if distinct_strips(&c.strip[on.clone()]) >= o.min_strips {
+            let seen = distinct_strips(&c.strip[on.clone()]);
+            if seen >= o.min_strips || (seen >= o.min_strips_floor && seen >= self.need(a, p, m)) {
                 let w: f64 = c.w[on.clone()].iter().sum();
                 let mut at = m;
                 for _ in 0..o.recentre_rounds {
@@ -1708,6 +1764,43 @@ mod tests {
     }
 
     #[test]
+    fn rows_leaving_the_image_early_need_fewer_strips() {
+        let m = forward_camera();
+        let fld = field(300.0, 512.0, &m, 0.75, 0.1, -4f64.to_radians());
+        let found = |min_strips_floor: usize| {
+            let opts = StripsOptions {
+                min_strips_floor,
+                ..Default::default()
+            };
+            let mut rows = Vec::new();
+            StripsRows::new(opts, 15.0, &m)
+                .unwrap()
+                .find(&fld.rays, &fld.weights, &fld.pixel_rad, &mut rows)
+                .unwrap()
+                .expect("a vanishing point");
+            for r in &rows {
+                let e = nearest(&r.normal, &fld.normals);
+                assert!(
+                    e < 2.5 / 300.0,
+                    "floor {min_strips_floor}: a row {e} rad off"
+                );
+            }
+            rows.len()
+        };
+        // the outer rows leave the image by their sides: 9 rows found needing 8 strips, 10
+        // with the default floor of 7, 12 with a floor of 5
+        let (all, default, five) = (
+            found(8),
+            found(StripsOptions::default().min_strips_floor),
+            found(5),
+        );
+        assert!(
+            all < default && default < five,
+            "{all}, {default} and {five} rows with floors of 8, the default and 5"
+        );
+    }
+
+    #[test]
     fn scattered_points_give_no_rows_between_the_teeth() {
         // rows plus uniform weeds: every published row is a true row
         let m = forward_camera();
@@ -1827,6 +1920,20 @@ mod tests {
                     ..StripsOptions::default()
                 },
                 "min_strips",
+            ),
+            (
+                StripsOptions {
+                    min_strips_floor: 9,
+                    ..StripsOptions::default()
+                },
+                "min_strips_floor",
+            ),
+            (
+                StripsOptions {
+                    min_strips_share: 0.0,
+                    ..StripsOptions::default()
+                },
+                "min_strips_share",
             ),
             (
                 StripsOptions {
