@@ -1731,6 +1731,22 @@ mod tests {
         }
     }
 
+    /// How many rows the strips method with `opts` publishes on `fld`, each asserted to lie
+    /// on a true row (`what` names the options in the message).
+    fn true_rows(fld: &Field, m: &Mounting, opts: StripsOptions, what: &str) -> usize {
+        let mut rows = Vec::new();
+        StripsRows::new(opts, 15.0, m)
+            .unwrap()
+            .find(&fld.rays, &fld.weights, &fld.pixel_rad, &mut rows)
+            .unwrap()
+            .expect("a vanishing point");
+        for r in &rows {
+            let e = nearest(&r.normal, &fld.normals);
+            assert!(e < 2.5 / 300.0, "{what}: a row {e} rad off");
+        }
+        rows.len()
+    }
+
     #[test]
     fn rows_slanting_across_the_strips_are_found_once_straightened() {
         let m = forward_camera();
@@ -1740,20 +1756,7 @@ mod tests {
                 straighten,
                 ..Default::default()
             };
-            let mut rows = Vec::new();
-            StripsRows::new(opts, 15.0, &m)
-                .unwrap()
-                .find(&fld.rays, &fld.weights, &fld.pixel_rad, &mut rows)
-                .unwrap()
-                .expect("a vanishing point");
-            for r in &rows {
-                let e = nearest(&r.normal, &fld.normals);
-                assert!(
-                    e < 2.5 / 300.0,
-                    "straighten {straighten}: a row {e} rad off"
-                );
-            }
-            rows.len()
+            true_rows(&fld, &m, opts, &format!("straighten {straighten}"))
         };
         // the outer rows cross each strip at a slant: 8 rows found before, 14 straightened
         let (sheared, straight) = (found(false), found(true));
@@ -1772,20 +1775,7 @@ mod tests {
                 min_strips_floor,
                 ..Default::default()
             };
-            let mut rows = Vec::new();
-            StripsRows::new(opts, 15.0, &m)
-                .unwrap()
-                .find(&fld.rays, &fld.weights, &fld.pixel_rad, &mut rows)
-                .unwrap()
-                .expect("a vanishing point");
-            for r in &rows {
-                let e = nearest(&r.normal, &fld.normals);
-                assert!(
-                    e < 2.5 / 300.0,
-                    "floor {min_strips_floor}: a row {e} rad off"
-                );
-            }
-            rows.len()
+            true_rows(&fld, &m, opts, &format!("floor {min_strips_floor}"))
         };
         // the outer rows leave the image by their sides: 9 rows found needing 8 strips, 10
         // with the default floor of 7, 12 with a floor of 5
