@@ -17,9 +17,9 @@
 //! point) within the expected heading and tilt; the comb's period and phase then come from
 //! the peaks' u (the strongest Fourier component), read on the peaks again with each strip
 //! straightened about that point, and each tooth seen in at least `min_strips` strips (fewer
-//! when its line leaves the image early) is a row through the vanishing point. Peaks between the teeth (weeds,
-//! plant edges, shadows) are not rows. Every length is in pixels of that virtual image, so the
-//! same scene through any focal length gives the same rows.
+//! when its line leaves the image early) is a row through the vanishing point. Peaks between
+//! the teeth (weeds, plant edges, shadows) are not rows. Every length is in pixels of that
+//! virtual image, so the same scene through any focal length gives the same rows.
 
 use super::pose::RobotAxes;
 use super::{DetectError, Method, Row};
