@@ -74,6 +74,7 @@ pub struct StripsOptions {
     /// strips its line crosses inside their points (below `min_depth_px`), rounded up, but
     /// at least `min_strips_floor` and at most `min_strips`.
     pub min_strips_share: f64,
+    /// The fewest strips a tooth ever needs (see `min_strips_share`).
     pub min_strips_floor: usize,
     /// Shortest and longest comb period searched, in u (lateral over depth in the pencil:
     /// row spacing over the camera's height, about).
@@ -649,6 +650,7 @@ impl StripsRows {
             p1 = p1.max(p);
         }
         let sh = self.opts.strip_px;
+        let centre = |s: usize| p0 + (s as f64 + 0.5) * sh;
         // the point's strip and its position along it, straightened about `about` (a point
         // less than a strip below that point stays: its line is too steep to follow)
         let place = |a: f64, p: f64| {
@@ -656,7 +658,7 @@ impl StripsRows {
             let Some((av, pv)) = about else {
                 return (s, a);
             };
-            let (d, dc) = (p - pv, p0 + (s as f64 + 0.5) * sh - pv);
+            let (d, dc) = (p - pv, centre(s) - pv);
             if d >= sh && dc >= 0.5 * sh {
                 (s, av + (a - av) * dc / d)
             } else {
@@ -690,12 +692,10 @@ impl StripsRows {
             let lo = row.iter().position(|&x| x > 0.0);
             let hi = row.iter().rposition(|&x| x > 0.0);
             if let (Some(lo), Some(hi)) = (lo, hi) {
-                let p = p0 + (s as f64 + 0.5) * sh;
-                self.spans.push([p, a0 + lo as f64, a0 + hi as f64 + 1.0]);
+                self.spans
+                    .push([centre(s), a0 + lo as f64, a0 + hi as f64 + 1.0]);
             }
-        }
-        for s in 0..strips {
-            self.strip_peaks(s, bins, a0, p0 + (s as f64 + 0.5) * sh);
+            self.strip_peaks(s, bins, a0, centre(s));
         }
     }
 
