@@ -183,9 +183,11 @@ pub fn resolve(
     if o.method == Method::Auto {
         o.method = auto_method(&resolution, &cal.mounting);
     }
-    if o.method == Method::Strips && o.threshold.target_points.is_none() {
+    if o.method == Method::Strips {
         let pixels = resolution.width as f64 * resolution.height as f64;
-        o.threshold.target_points = Some(((o.strips.kept_share * pixels).round() as usize).max(1));
+        let share = ((o.strips.kept_share * pixels).round() as usize).max(1);
+        o.threshold.target_points.get_or_insert(share);
+        o.threshold.min_level.get_or_insert(o.strips.kept_min_level);
     }
     let h = &mut o.hough;
     h.phi_bins.get_or_insert(bins(REFERENCE_BINS));
@@ -414,7 +416,7 @@ mod tests {
     }
 
     #[test]
-    fn the_strips_keep_a_share_of_the_image_and_other_methods_a_fixed_count() {
+    fn the_strips_keep_a_share_of_the_image_above_their_floor_and_other_methods_a_fixed_count() {
         let text = "[pinhole]\nwidth = 640\nheight = 480\nfx = 300.0\nfy = 300.0\n\
                     cx = 319.5\ncy = 239.5\n[mounting]\npitch_deg = -47.0\n";
         let cal = Calibration::parse_toml(text, std::path::Path::new("p.toml")).unwrap();
@@ -425,13 +427,17 @@ mod tests {
             o.threshold.target_points,
             Some((share * 640.0 * 480.0).round() as usize)
         );
+        assert_eq!(o.threshold.min_level, Some(o.strips.kept_min_level));
+        assert_ne!(
+            o.strips.kept_min_level,
+            super::super::threshold::DEFAULT_MIN_LEVEL
+        );
         // an explicit target, or another method, keeps its own
         let explicit: DetectorOptions =
-            toml::from_str("[threshold]\ntarget_points = 5000\n").unwrap();
-        assert_eq!(
-            resolve(&cal, &explicit).unwrap().0.threshold.target_points,
-            Some(5000)
-        );
+            toml::from_str("[threshold]\ntarget_points = 5000\nmin_level = 12\n").unwrap();
+        let (o, _) = resolve(&cal, &explicit).unwrap();
+        assert_eq!(o.threshold.target_points, Some(5000));
+        assert_eq!(o.threshold.min_level, Some(12));
         let hough = DetectorOptions {
             method: Method::Hough,
             ..Default::default()
@@ -441,6 +447,10 @@ mod tests {
         assert_eq!(
             o.threshold.target_points(),
             super::super::threshold::DEFAULT_TARGET_POINTS
+        );
+        assert_eq!(
+            o.threshold.min_level(),
+            super::super::threshold::DEFAULT_MIN_LEVEL
         );
     }
 

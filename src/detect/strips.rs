@@ -39,6 +39,11 @@ pub struct StripsOptions {
     /// `threshold.target_points` is absent): the strips' profiles need the rows' whole
     /// vegetation, pale plants included, not only its brightest few per cent.
     pub kept_share: f64,
+    /// The threshold's floor for this method (`threshold.min_level` when that is absent): 7
+    /// (10 until 2026-12-06) keeps faint and shadowed plants (2G − R − B from 16 on the
+    /// halved excess-green image), which a sparse field needs to fill its share
+    /// (docs/real.md).
+    pub kept_min_level: u8,
     /// Gaussian smoothing (sigma) of a strip's profile before its peaks are read: about a
     /// plant's half-width.
     pub smooth_px: f64,
@@ -116,6 +121,7 @@ impl Default for StripsOptions {
         StripsOptions {
             strip_px: 11.0,
             kept_share: 0.23,
+            kept_min_level: 7,
             smooth_px: 2.5,
             peak_fraction: 0.15,
             peak_sigma_px: 4.0,
@@ -137,7 +143,7 @@ impl Default for StripsOptions {
             polish: true,
             polish_max_band_deg: None,
             recentre_rounds: 2,
-            prominence_px: 12.0,
+            prominence_px: 15.0,
             straighten: true,
         }
     }

@@ -11,28 +11,24 @@ use super::DetectError;
 use serde::{Deserialize, Serialize};
 
 /// Options of the adaptive threshold.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ThresholdOptions {
     /// About how many points to keep. When absent: [`DEFAULT_TARGET_POINTS`], or, for the
     /// strips method, `strips.kept_share` of the working image's pixels (resolved with the
     /// calibration, `omnirow config detector` shows the value in force).
     pub target_points: Option<usize>,
-    /// Pixels at or below this value are never kept (background).
-    pub min_level: u8,
-}
-
-impl Default for ThresholdOptions {
-    fn default() -> Self {
-        ThresholdOptions {
-            target_points: None,
-            min_level: 10,
-        }
-    }
+    /// Pixels at or below this value are never kept (background). When absent:
+    /// [`DEFAULT_MIN_LEVEL`], or, for the strips method, `strips.kept_min_level` (resolved
+    /// with the calibration, as `target_points` is).
+    pub min_level: Option<u8>,
 }
 
 /// The points kept when `target_points` is absent (and the method is not the strips).
 pub const DEFAULT_TARGET_POINTS: usize = 15_000;
+
+/// The floor in force when `min_level` is absent (and the method is not the strips).
+pub const DEFAULT_MIN_LEVEL: u8 = 10;
 
 /// The most points a configuration may ask for (more than a 5-megapixel sensor has: a
 /// hostile value cannot make the buffers sized for it exhaust the memory).
@@ -42,6 +38,11 @@ impl ThresholdOptions {
     /// The target in force.
     pub fn target_points(&self) -> usize {
         self.target_points.unwrap_or(DEFAULT_TARGET_POINTS)
+    }
+
+    /// The floor in force.
+    pub fn min_level(&self) -> u8 {
+        self.min_level.unwrap_or(DEFAULT_MIN_LEVEL)
     }
 
     pub fn validate(&self) -> Result<(), DetectError> {
@@ -142,7 +143,7 @@ pub fn keep_brightest(
     let n = opts.target_points() as u64;
     let mut above: u64 = 0; // pixels with value > level
     let mut level = 255usize;
-    let lo = opts.min_level as usize + 1;
+    let lo = opts.min_level() as usize + 1;
     let candidates: u64 = hist[lo.min(256)..].iter().map(|&c| c as u64).sum();
     // Descend until the pixels at >= level reach N.
     while level >= lo {
@@ -215,7 +216,7 @@ mod tests {
         for n in [0, MAX_TARGET_POINTS + 1] {
             let opts = ThresholdOptions {
                 target_points: Some(n),
-                min_level: 10,
+                min_level: Some(10),
             };
             let e = keep_brightest(&image, &mask, &opts, &mut Vec::new())
                 .unwrap_err()
@@ -232,7 +233,7 @@ mod tests {
         let mut out = Vec::new();
         let opts = ThresholdOptions {
             target_points: Some(10),
-            min_level: 10,
+            min_level: Some(10),
         };
         let r = keep_brightest(&image, &mask, &opts, &mut out).unwrap();
         assert_eq!(r.kept, 10);
@@ -248,7 +249,7 @@ mod tests {
         let mut out = Vec::new();
         let opts = ThresholdOptions {
             target_points: Some(100),
-            min_level: 10,
+            min_level: Some(10),
         };
         let r = keep_brightest(&image, &mask, &opts, &mut out).unwrap();
         assert_eq!(r.stride, 10);
@@ -285,7 +286,7 @@ mod tests {
                 }
             }
             let mut out = Vec::new();
-            let opts = ThresholdOptions { target_points: Some(n), min_level: 10 };
+            let opts = ThresholdOptions { target_points: Some(n), min_level: Some(10) };
             let r = keep_brightest(&image, &mask, &opts, &mut out).unwrap();
             let mut valid: Vec<u8> = image.iter().zip(&mask).filter(|p| *p.1 != 0).map(|p| *p.0).collect();
             valid.sort_unstable();
@@ -319,7 +320,7 @@ mod tests {
             let image: Vec<u8> = (0..4000).map(|_| { s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407); (s >> 56) as u8 }).collect();
             let mask = vec![0xFFu8; image.len()];
             let mut out = Vec::new();
-            let opts = ThresholdOptions { target_points: Some(n), min_level: 10 };
+            let opts = ThresholdOptions { target_points: Some(n), min_level: Some(10) };
             let r = keep_brightest(&image, &mask, &opts, &mut out).unwrap();
             let cand = image.iter().filter(|&&v| v > 10).count();
             prop_assert_eq!(r.candidates, cand);
