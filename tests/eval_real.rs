@@ -141,7 +141,22 @@ fn scores_synthetic_fields_through_a_pinhole() {
             assert!(f["within"].as_f64().unwrap() >= 0.9, "{f}");
             assert_eq!(f["misses_top_middle_bottom"].as_array().unwrap().len(), 3);
         }
+        // Straight synthetic rows: each labelled row's own best circle finds it, and so does
+        // the best one through the labels' vanishing point; through the detector's (within
+        // a few pixels) at least as many as the detector found.
+        let c = &v["ceiling"];
+        let n = |k: &str| c[k].as_u64().unwrap_or_else(|| panic!("{k}: {v}"));
+        assert_eq!(n("free"), labelled, "{v}");
+        assert_eq!(n("labels_vp"), labelled, "{v}");
+        assert!(
+            n("detected_vp") >= v["matched_rows"].as_u64().unwrap(),
+            "{v}"
+        );
     }
+    assert!(
+        md.contains("| best through the labels' vanishing point | 3 |"),
+        "{md}"
+    );
     assert!(
         md.contains("| under 0.3 | 0.3 to 0.6 | 0.6 and over |"),
         "{md}"

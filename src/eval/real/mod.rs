@@ -6,10 +6,12 @@
 //! outcomes as JSON lines, and overlays of the worst images. The label formats live in
 //! [`labels`], the metrics in [`score`]; docs/real.md defines both.
 
+pub mod ceiling;
 pub mod labels;
 mod report;
 pub mod score;
 
+pub use ceiling::Ceiling;
 pub use labels::{LabelError, MaskTracing, ScanCurve};
 pub use report::{markdown, write, Summary};
 pub use score::{ImageScore, LabelFit, ProjectedRow, ScoreOptions};
@@ -86,6 +88,8 @@ pub struct RealOutcome {
     /// For each labelled row, how near the published rows came to it (docs/real.md, "Why
     /// rows are missed").
     pub label_fits: Vec<LabelFit>,
+    /// The labelled rows each ceiling's rows find (docs/real.md, "Ceilings").
+    pub ceiling: Ceiling,
 }
 
 impl RealOutcome {
@@ -107,6 +111,7 @@ impl RealOutcome {
             rows: Vec::new(),
             vanishing_point: None,
             label_fits: Vec::new(),
+            ceiling: Ceiling::default(),
         }
     }
 }
@@ -336,6 +341,8 @@ fn score_one(
         o.vanishing_point = Some([vp.direction.x, vp.direction.y, vp.direction.z]);
         o.vp_detected_px = score::vanishing_pixel(cal, &vp.direction);
     }
+    let detected = det.vanishing_point.map(|v| v.direction);
+    o.ceiling = Ceiling::compute(cal, &labels, detected.as_ref(), &opts.score);
     if let (Some(a), Some(b)) = (o.vp_labels_px, o.vp_detected_px) {
         o.vp_error_px = Some((a[0] - b[0]).hypot(a[1] - b[1]));
     }

@@ -46,6 +46,34 @@ pub struct Summary {
     pub missed: [usize; 3],
     /// ... and of the last, those whose misses lie mostly in the top, middle, bottom third.
     pub nearly_missed_where: [usize; 3],
+    /// The ceilings (docs/real.md, "Ceilings"): each labelled row's own best great circle,
+    /// the best through the detector's vanishing point, the best through the labels'.
+    pub ceilings: [CeilingFigures; 3],
+}
+
+/// One ceiling over the scored images where it exists: those images, their labelled rows,
+/// the rows the ceiling finds and those the detector found there.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct CeilingFigures {
+    pub images: usize,
+    pub labelled: usize,
+    pub found: usize,
+    pub detector_found: usize,
+}
+
+impl CeilingFigures {
+    fn of<'a>(outcomes: impl Iterator<Item = (&'a RealOutcome, Option<usize>)>) -> Self {
+        let mut f = CeilingFigures::default();
+        for (o, found) in outcomes {
+            if let Some(found) = found {
+                f.images += 1;
+                f.labelled += o.labelled_rows;
+                f.found += found;
+                f.detector_found += o.matched_rows;
+            }
+        }
+        f
+    }
 }
 
 impl Summary {
@@ -77,6 +105,12 @@ impl Summary {
                 nearly_missed_where[t] += 1;
             }
         }
+        let scored = || ok.iter().copied().filter(|o| o.score.is_some());
+        let ceilings = [
+            CeilingFigures::of(scored().map(|o| (o, Some(o.ceiling.free)))),
+            CeilingFigures::of(scored().map(|o| (o, o.ceiling.detected_vp))),
+            CeilingFigures::of(scored().map(|o| (o, o.ceiling.labels_vp))),
+        ];
         Summary {
             images: outcomes.len(),
             errors: outcomes.len() - ok.len(),
@@ -98,6 +132,7 @@ impl Summary {
             ms_p90: quantile(&ms, 0.9),
             missed,
             nearly_missed_where,
+            ceilings,
         }
     }
 }
@@ -178,6 +213,34 @@ pub fn markdown(r: &RealResults, command: &str, worst_n: usize) -> String {
         "Labelled rows not found, by the share of their scan lines on which the nearest published row lies within tolerance (`label_fits` in outcomes.jsonl; docs/real.md):\n\n| under 0.3 | 0.3 to 0.6 | 0.6 and over | of those, misses mostly in the top third | middle third | bottom third |\n|---|---|---|---|---|---|"
     );
     let _ = writeln!(md, "| {m0} | {m1} | {m2} | {top} | {middle} | {bottom} |\n");
+    let _ = writeln!(
+        md,
+        "What the rows could at best find (docs/real.md, \"Ceilings\"): every labelled row published as the great circle that fits it best, free or through a vanishing point, on the scored images where that point exists; beside it the detector's recall on the same images:\n\n| rows | images | labelled rows | found | recall | the detector's recall there |\n|---|---|---|---|---|---|"
+    );
+    let names = [
+        "each row's own best circle",
+        "best through the detector's vanishing point",
+        "best through the labels' vanishing point",
+    ];
+    for (name, c) in names.iter().zip(&s.ceilings) {
+        let ratio = |a: usize| {
+            if c.labelled > 0 {
+                format!("{:.3}", a as f64 / c.labelled as f64)
+            } else {
+                "–".into()
+            }
+        };
+        let _ = writeln!(
+            md,
+            "| {name} | {} | {} | {} | {} | {} |",
+            c.images,
+            c.labelled,
+            c.found,
+            ratio(c.found),
+            ratio(c.detector_found)
+        );
+    }
+    md.push('\n');
     let _ = writeln!(
         md,
         "## The {worst_n} worst images\n\nOverlays in `overlays/`: labelled rows green, published rows in their method's colour, the labels' vanishing point a green cross, the detector's yellow.\n\n| image | score | labelled | found | published in band | published | VP error (px) | error |\n|---|---|---|---|---|---|---|---|"
