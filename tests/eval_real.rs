@@ -334,7 +334,9 @@ fn crdld_default_method_holds_on_every_tenth_image() {
         let o = outcomes(&out);
         assert!(o.iter().all(|v| v["error"].is_null()));
         let (recall, precision, score) = pooled(&o);
-        // measured 0.648 / 0.658 / 0.482 at f = 300 px (with the threshold's floor 10
+        // measured 0.660 / 0.674 / 0.498 at f = 300 px (each row on its own line and the
+        // polish's band 6° at the reference resolution instead of 16°: 0.648 / 0.658 / 0.482;
+        // with the threshold's floor 10
         // instead of the strips' 7 and prominence within 12 px: 0.631 / 0.678 / 0.500, and
         // 0.652 / 0.674 / 0.493 before the straightened peaks; keeping 15000 points instead of
         // 23 % of the pixels: 0.549 / 0.709 / 0.444; peaks above the strip's median:
@@ -344,12 +346,12 @@ fn crdld_default_method_holds_on_every_tenth_image() {
         // method 0.307 / 0.241 / 0.213)
         if f == "300" {
             assert!(
-                recall >= 0.62 && precision >= 0.64 && score >= 0.47,
+                recall >= 0.64 && precision >= 0.66 && score >= 0.48,
                 "{stdout}"
             );
         }
         scores.push(score);
     }
-    // two focal-length guesses 3x apart give nearly the same score (measured 0.482, 0.492)
+    // two focal-length guesses 3x apart give nearly the same score (measured 0.498, 0.509)
     assert!((scores[0] - scores[1]).abs() <= 0.05, "{scores:?}");
 }

@@ -114,6 +114,22 @@ pub struct StripsOptions {
     /// sharp peak rather than a smear `strip_px` × its slope wide. The search itself keeps
     /// the first peaks (climbing on the straightened ones lost rows: docs/real.md).
     pub straighten: bool,
+    /// Each row is fitted its own straight line (in the virtual image) to the straightened
+    /// peaks on its tooth (those within `comb_band` of it in u), each peak counting once as
+    /// every scan line of a labelled row does, with the vanishing point as one more point
+    /// weighing `own_line_anchor` times all of them; otherwise (false) the row is its
+    /// tooth's line through the vanishing point. Real rows do not all meet in one point
+    /// (rows bend, rise and fall with the ground; a drill wanders), and a row's line through
+    /// a common point a few pixels off misses its far field (docs/real.md).
+    pub own_lines: bool,
+    /// The vanishing point's weight in a row's own line, as a share of the row's peaks: the
+    /// far field, where the rows merge, then follows the common point, and the near field
+    /// the row's own peaks.
+    pub own_line_anchor: f64,
+    /// The row's line is fitted again without the peaks farther from the first fit than
+    /// this many `peak_sigma_px` (a weed or a neighbouring plant on the tooth's band);
+    /// 0 keeps every peak.
+    pub own_line_reject: f64,
 }
 
 impl Default for StripsOptions {
@@ -145,14 +161,18 @@ impl Default for StripsOptions {
             recentre_rounds: 2,
             prominence_px: 15.0,
             straighten: true,
+            own_lines: true,
+            own_line_anchor: 0.3,
+            own_line_reject: 2.0,
         }
     }
 }
 
-/// The strips polish's widest band (degrees) at the reference angular resolution: wider
-/// than the pencil's, since the strips' rows lie on their own peaks and only need room to
-/// reach the row's centre (measured on CRDLD: docs/real.md).
-pub const REFERENCE_POLISH_MAX_BAND_DEG: f64 = 16.0;
+/// The strips polish's widest band (degrees) at the reference angular resolution: twice the
+/// pencil's, since the strips' rows lie on their own peaks and only need room to reach the
+/// row's centre, and no wider, since a wide band lets the refit pull a row off its own
+/// line (16 until 2026-12-06; measured on CRDLD: docs/real.md).
+pub const REFERENCE_POLISH_MAX_BAND_DEG: f64 = 6.0;
 
 impl StripsOptions {
     /// The polish's widest band (degrees) in force (the option, else the reference value).
@@ -192,6 +212,18 @@ impl StripsOptions {
             return bad(&format!(
                 "peak_sigma_px = {} must be within (0, 100]",
                 self.peak_sigma_px
+            ));
+        }
+        if !(self.own_line_anchor.is_finite() && (0.0..=100.0).contains(&self.own_line_anchor)) {
+            return bad(&format!(
+                "own_line_anchor = {} must be within [0, 100]",
+                self.own_line_anchor
+            ));
+        }
+        if !(self.own_line_reject.is_finite() && (0.0..=100.0).contains(&self.own_line_reject)) {
+            return bad(&format!(
+                "own_line_reject = {} must be within [0, 100]",
+                self.own_line_reject
             ));
         }
         if !(self.search_step_px.is_finite() && (1.0..=200.0).contains(&self.search_step_px)) {
@@ -1136,7 +1168,12 @@ impl StripsRows {
         }
         let depth = 100.0_f64.max(2.0 * o.min_depth_px);
         for &[m, _, support] in &self.teeth {
-            let n = vp.cross(&self.to_ray(a + m * depth, p + depth));
+            let pencil = vp.cross(&self.to_ray(a + m * depth, p + depth));
+            let n = match self.own_line(a, p, m, o.comb_band * period) {
+                Some(n) if n.dot(&pencil) < 0.0 => -n,
+                Some(n) => n,
+                None => pencil,
+            };
             let norm = n.norm();
             if norm > 0.0 {
                 rows.push(Row {
@@ -1147,6 +1184,80 @@ impl StripsRows {
                 });
             }
         }
+    }
+}
+
+impl StripsRows {
+    /// The great circle (unnormalised normal) of the row on the tooth at `u` of the pencil
+    /// through (a, p), `band` the tooth's half-width in u, fitted its own line
+    /// (`own_lines`): a = c₀ + c₁·d by weighted least squares over the peaks at depth
+    /// d = p' − p > `min_depth_px` whose u lies within `band` of the tooth (weight 1 each)
+    /// and the point (a, p) itself (d = 0, weight `own_line_anchor` × their count). `None`
+    /// when the option is off or the peaks lie in fewer than `min_strips_floor` strips (at
+    /// least 3): the row is then its tooth's line.
+    /// The great circle (unnormalised normal) of the row on the tooth at `u` of the pencil
+    /// through (a, p), `band` the tooth's half-width in u, fitted its own line
+    /// (`own_lines`): [`Self::line_fit`] over the peaks whose u lies within `band` of the
+    /// tooth, then again without those farther than `own_line_reject` × `peak_sigma_px`
+    /// from that line. `None` when the option is off or too few strips hold peaks: the
+    /// row is then its tooth's line.
+    fn own_line(&self, a: f64, p: f64, u: f64, band: f64) -> Option<Vector3<f64>> {
+        let o = &self.opts;
+        if !o.own_lines {
+            return None;
+        }
+        let on = |k: &Peak| {
+            let d = k.p - p;
+            d > o.min_depth_px && ((k.a - a) / d - u).abs() <= band
+        };
+        let (mut c0, mut c1) = self.line_fit(a, p, on)?;
+        if o.own_line_reject > 0.0 {
+            let lim = o.own_line_reject * o.peak_sigma_px;
+            let (b0, b1) = (c0, c1);
+            let near = |k: &Peak| on(k) && (k.a - (b0 + b1 * (k.p - p))).abs() <= lim;
+            (c0, c1) = self.line_fit(a, p, near)?;
+        }
+        let (d1, d2) = (o.min_depth_px.max(1.0), 100.0_f64.max(4.0 * o.min_depth_px));
+        let n = self
+            .to_ray(c0 + c1 * d1, p + d1)
+            .cross(&self.to_ray(c0 + c1 * d2, p + d2));
+        (n.norm() > 0.0).then_some(n)
+    }
+
+    /// The line a = c₀ + c₁·d (d = depth below p) fitted by least squares to the peaks `on`
+    /// deeper than `min_depth_px` (weight 1 each, as every scan line of a labelled row
+    /// counts once) and to the point (a, p) itself (d = 0, weight `own_line_anchor` × their
+    /// count): (c₀, c₁). `None` when they lie in fewer than `min_strips_floor` strips (at
+    /// least 3).
+    fn line_fit(&self, a: f64, p: f64, on: impl Fn(&Peak) -> bool) -> Option<(f64, f64)> {
+        let o = &self.opts;
+        let (mut n, mut sd, mut sa, mut strips) = (0.0, 0.0, 0.0, 0usize);
+        let mut last = u32::MAX;
+        for k in self.peaks.iter().filter(|k| on(k)) {
+            n += 1.0;
+            sd += k.p - p;
+            sa += k.a;
+            // the peaks are in the strips' order
+            if k.strip != last {
+                (last, strips) = (k.strip, strips + 1);
+            }
+        }
+        if strips < o.min_strips_floor.max(3) {
+            return None;
+        }
+        let wv = o.own_line_anchor * n;
+        let (dm, am) = (sd / (n + wv), (sa + wv * a) / (n + wv));
+        let (mut sdd, mut sda) = (wv * dm * dm, -wv * dm * (a - am));
+        for k in self.peaks.iter().filter(|k| on(k)) {
+            let dd = k.p - p - dm;
+            sdd += dd * dd;
+            sda += dd * (k.a - am);
+        }
+        if sdd <= 0.0 {
+            return None;
+        }
+        let c1 = sda / sdd;
+        Some((am - c1 * dm, c1))
     }
 }
 
@@ -1394,6 +1505,37 @@ mod tests {
             .fold(f64::MAX, f64::min)
     }
 
+    /// The centre line of the row at lateral `y` (metres) turned by `heading`, as a pinhole
+    /// of focal length `f` on a `size`² image mounted as `m` sees it: its rays from 1 m to
+    /// `reach` metres ahead.
+    fn centre_line(
+        f: f64,
+        size: f64,
+        m: &Mounting,
+        y: f64,
+        heading: f64,
+        reach: f64,
+    ) -> Vec<Vector3<f64>> {
+        let cam_from_robot = m.robot_from_camera().inverse();
+        let yaw = Rotation3::from_axis_angle(&Vector3::z_axis(), heading);
+        (0..400)
+            .map(|i| 1.0 + i as f64 * (reach - 1.0) / 399.0)
+            .map(|x| (cam_from_robot * (yaw * Vector3::new(x, y, -m.height_m))).normalize())
+            .filter(|r| {
+                let (row, col) = (r.x / -r.z * f, r.y / -r.z * f);
+                -r.z > 0.05 && row.abs() <= size / 2.0 && col.abs() <= size / 2.0
+            })
+            .collect()
+    }
+
+    /// The largest distance (pixels, at `f`) of `line`'s rays from the great circle `n`.
+    fn off_line_px(n: &Vector3<f64>, line: &[Vector3<f64>], f: f64) -> f64 {
+        let n = n.normalize();
+        line.iter()
+            .map(|r| n.dot(r).abs().min(1.0).asin() / (-r.z).powi(2) * f)
+            .fold(0.0, f64::max)
+    }
+
     /// A peak seen from a candidate: u, the kernel's width in u, weight and strip.
     #[derive(Debug, Clone, Copy, PartialEq)]
     struct Seen {
@@ -1491,6 +1633,43 @@ mod tests {
                 assert!(a.normal.dot(&b.normal).abs() < 0.9999, "duplicate rows");
             }
         }
+    }
+
+    #[test]
+    fn a_row_turned_off_the_common_point_gets_its_own_line() {
+        // five rows 0.5 m apart, the middle one laid 0.6° off the others (a drill that
+        // wandered): it does not pass through their vanishing point
+        let m = forward_camera();
+        let mut fld = field_at(300.0, 512.0, &m, &[-1.0, -0.5, 0.5, 1.0], 0.0);
+        let turned = field_at(300.0, 512.0, &m, &[0.0], 0.6f64.to_radians());
+        fld.rays.extend(&turned.rays);
+        fld.weights.extend(&turned.weights);
+        fld.pixel_rad.extend(&turned.pixel_rad);
+        // the row up to 10 m ahead, where the robot steers
+        let line = centre_line(300.0, 512.0, &m, 0.0, 0.6f64.to_radians(), 10.0);
+        let run = |own_lines: bool| {
+            let opts = StripsOptions {
+                own_lines,
+                ..Default::default()
+            };
+            let mut s = StripsRows::new(opts, 15.0, &m).unwrap();
+            let mut rows = Vec::new();
+            s.find(&fld.rays, &fld.weights, &fld.pixel_rad, &mut rows)
+                .unwrap()
+                .expect("a vanishing point");
+            let off = rows
+                .iter()
+                .map(|r| off_line_px(&r.normal, &line, 300.0))
+                .fold(f64::MAX, f64::min);
+            (rows.len(), off)
+        };
+        let (n_pencil, pencil) = run(false);
+        let (n_own, own) = run(true);
+        assert_eq!((n_pencil, n_own), (5, 5));
+        // its own line strays half as far (4.0 and 1.9 px at worst when written): its far
+        // end is held near the common point by the anchor
+        assert!(own < 2.5, "own line {own} px off");
+        assert!(pencil > 1.8 * own, "pencil {pencil} px, own {own} px");
     }
 
     /// The field of [`rows_and_vanishing_point_of_a_flat_field`] with scattered weeds: its
@@ -1620,7 +1799,8 @@ mod tests {
     #[test]
     fn rows_spaced_unevenly_lie_on_their_own_peaks_not_on_the_comb() {
         // 0.5 m rows, each shifted by up to 0.09 m (under the comb's band of a quarter
-        // period): the comb's evenly spaced teeth miss them, their own peaks do not
+        // period): the comb's evenly spaced teeth miss them, their own peaks do not (the rows
+        // through the vanishing point: their own lines would find them either way)
         let m = forward_camera();
         let shift = [0.0, 0.09, -0.07, 0.05, -0.09, 0.08, -0.04, 0.07, -0.08];
         let ys: Vec<f64> = (-4..=4)
@@ -1631,6 +1811,7 @@ mod tests {
         let worst = |rounds: usize| {
             let opts = StripsOptions {
                 recentre_rounds: rounds,
+                own_lines: false,
                 ..StripsOptions::default()
             };
             let mut s = StripsRows::new(opts, 15.0, &m).unwrap();
@@ -1817,9 +1998,17 @@ mod tests {
         s.find(&fld.rays, &fld.weights, &fld.pixel_rad, &mut rows)
             .unwrap();
         assert!(rows.len() >= 3);
+        // each published row lies on a true row where that row is in the image
+        let lines: Vec<_> = (-8..=8)
+            .map(|k| centre_line(300.0, 512.0, &m, k as f64 * 0.6, 0.0, 40.0))
+            .filter(|l| l.len() >= 2)
+            .collect();
         for r in &rows {
-            let e = nearest(&r.normal, &fld.normals);
-            assert!(e < 2.5 / 300.0, "a row {e} rad from every true row");
+            let off = lines
+                .iter()
+                .map(|l| off_line_px(&r.normal, l, 300.0))
+                .fold(f64::MAX, f64::min);
+            assert!(off < 2.5, "a row {off} px from every true row");
         }
     }
 
