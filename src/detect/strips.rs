@@ -1185,16 +1185,7 @@ impl StripsRows {
             }
         }
     }
-}
 
-impl StripsRows {
-    /// The great circle (unnormalised normal) of the row on the tooth at `u` of the pencil
-    /// through (a, p), `band` the tooth's half-width in u, fitted its own line
-    /// (`own_lines`): a = c₀ + c₁·d by weighted least squares over the peaks at depth
-    /// d = p' − p > `min_depth_px` whose u lies within `band` of the tooth (weight 1 each)
-    /// and the point (a, p) itself (d = 0, weight `own_line_anchor` × their count). `None`
-    /// when the option is off or the peaks lie in fewer than `min_strips_floor` strips (at
-    /// least 3): the row is then its tooth's line.
     /// The great circle (unnormalised normal) of the row on the tooth at `u` of the pencil
     /// through (a, p), `band` the tooth's half-width in u, fitted its own line
     /// (`own_lines`): [`Self::line_fit`] over the peaks whose u lies within `band` of the
