@@ -214,17 +214,13 @@ impl StripsOptions {
                 self.peak_sigma_px
             ));
         }
-        if !(self.own_line_anchor.is_finite() && (0.0..=100.0).contains(&self.own_line_anchor)) {
-            return bad(&format!(
-                "own_line_anchor = {} must be within [0, 100]",
-                self.own_line_anchor
-            ));
-        }
-        if !(self.own_line_reject.is_finite() && (0.0..=100.0).contains(&self.own_line_reject)) {
-            return bad(&format!(
-                "own_line_reject = {} must be within [0, 100]",
-                self.own_line_reject
-            ));
+        for (name, v) in [
+            ("own_line_anchor", self.own_line_anchor),
+            ("own_line_reject", self.own_line_reject),
+        ] {
+            if !(v.is_finite() && (0.0..=100.0).contains(&v)) {
+                return bad(&format!("{name} = {v} must be within [0, 100]"));
+            }
         }
         if !(self.search_step_px.is_finite() && (1.0..=200.0).contains(&self.search_step_px)) {
             return bad(&format!(
@@ -2076,6 +2072,20 @@ mod tests {
     #[test]
     fn bad_options_are_named() {
         for (o, key) in [
+            (
+                StripsOptions {
+                    own_line_anchor: -0.1,
+                    ..StripsOptions::default()
+                },
+                "own_line_anchor",
+            ),
+            (
+                StripsOptions {
+                    own_line_reject: f64::INFINITY,
+                    ..StripsOptions::default()
+                },
+                "own_line_reject",
+            ),
             (
                 StripsOptions {
                     strip_px: 0.0,
