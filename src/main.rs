@@ -6,7 +6,7 @@ fn main() -> ExitCode {
     match omnirow::cli::main() {
         Ok(code) => code,
         Err(err) => {
-            eprintln!("omnirow: error: {err:#}");
+            eprintln!("omnirow: error: {}", omnirow::cli::error_line(&err));
             ExitCode::from(2)
         }
     }

@@ -75,8 +75,48 @@ pub fn main() -> anyhow::Result<ExitCode> {
     }
 }
 
+/// The one line `main` prints for an error: its chain of causes joined by ": ", each cause
+/// left out when the text so far already ends with it (many errors name their cause in
+/// their own message, and would otherwise print it twice).
+pub fn error_line(err: &anyhow::Error) -> String {
+    let mut line = String::new();
+    for cause in err.chain() {
+        let text = cause.to_string();
+        if line.is_empty() {
+            line = text;
+        } else if !line.ends_with(&text) {
+            line.push_str(": ");
+            line.push_str(&text);
+        }
+    }
+    line
+}
+
 /// Logs through tracing to stderr at level info; `RUST_LOG` filters, `OMNIROW_LOG_FORMAT=json`
 /// selects JSON (the node takes both from its configuration instead).
 pub fn init_logging() {
     crate::logging::init(crate::logging::LogFormat::Human, "info");
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[derive(Debug, thiserror::Error)]
+    enum Outer {
+        #[error("loading {0}: {1}")]
+        Named(&'static str, #[source] std::io::Error),
+        #[error("loading {0}")]
+        Bare(&'static str, #[source] std::io::Error),
+    }
+
+    #[test]
+    fn a_cause_already_in_the_message_is_printed_once() {
+        let io = || std::io::Error::other("disk on fire");
+        let named = anyhow::Error::new(Outer::Named("a.toml", io())).context("config");
+        assert_eq!(error_line(&named), "config: loading a.toml: disk on fire");
+        let bare = anyhow::Error::new(Outer::Bare("a.toml", io())).context("config");
+        assert_eq!(error_line(&bare), "config: loading a.toml: disk on fire");
+        assert_eq!(error_line(&anyhow::anyhow!("plain")), "plain");
+    }
 }
