@@ -1212,8 +1212,7 @@ impl StripsRows {
     }
 
     /// The line a = c₀ + c₁·d (d = depth below p) fitted by least squares to the peaks `on`
-    /// deeper than `min_depth_px` (weight 1 each, as every scan line of a labelled row
-    /// counts once) and to the point (a, p) itself (d = 0, weight `own_line_anchor` × their
+    /// (weight 1 each, as every scan line of a labelled row counts once) and to the point (a, p) itself (d = 0, weight `own_line_anchor` × their
     /// count): (c₀, c₁). `None` when they lie in fewer than `min_strips_floor` strips (at
     /// least 3).
     fn line_fit(&self, a: f64, p: f64, on: impl Fn(&Peak) -> bool) -> Option<(f64, f64)> {

@@ -13,7 +13,7 @@
 use super::labels::ScanCurve;
 use super::score::{ImageScore, ProjectedRow, ScoreOptions};
 use crate::camera::Calibration;
-use crate::sphere::any_perpendicular;
+use crate::sphere::{any_perpendicular, fit_normal};
 use nalgebra::{Matrix2, Matrix3, SymmetricEigen, Vector3};
 use serde::Serialize;
 
@@ -70,12 +70,7 @@ pub fn best_circle(rays: &[Vector3<f64>], through: Option<&Vector3<f64>>) -> Opt
         return None;
     }
     let n = match through {
-        None => {
-            let s: Matrix3<f64> = rays.iter().map(|r| r * r.transpose()).sum();
-            let e = SymmetricEigen::new(s);
-            let i = e.eigenvalues.imin();
-            e.eigenvectors.column(i).into_owned()
-        }
+        None => return fit_normal(rays, None).map(|f| f.normal),
         Some(v) => {
             // the normal lies in the plane perpendicular to v: a 2 × 2 problem there
             let v = v.try_normalize(0.0)?;
