@@ -152,7 +152,14 @@ fn scores_synthetic_fields_through_a_pinhole() {
             n("detected_vp") >= v["matched_rows"].as_u64().unwrap(),
             "{v}"
         );
+        // The strips (`auto` on this lens) read their measure at the labels' vanishing
+        // point too: on a clean field the climb from it ends on the search's own summit.
+        let a = &v["vp_agreement"];
+        let f = |k: &str| a[k].as_f64().unwrap_or_else(|| panic!("{k}: {v}"));
+        assert!(f("labels_summit_from_search_px") <= 3.0, "{v}");
+        assert!((f("labels") / f("search") - 1.0).abs() < 0.01, "{v}");
     }
+    assert!(md.contains("| 3 | 0 | 0 | 0 |"), "{md}");
     assert!(
         md.contains("| best through the labels' vanishing point | 3 |"),
         "{md}"
@@ -181,6 +188,8 @@ fn scores_synthetic_fields_through_a_pinhole() {
         }
         for (a, b) in outcomes(&single).iter().zip(outcomes(&tracked).iter()) {
             assert!(b["error"].is_null(), "{method}: {b}");
+            // the strips' measure is read only where the strips ran
+            assert_eq!(a["vp_agreement"].is_null(), method != "strips", "{a}");
             assert!(
                 b["matched_rows"].as_u64() >= a["matched_rows"].as_u64(),
                 "{method}: {a} {b}"

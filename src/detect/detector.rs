@@ -1206,6 +1206,13 @@ impl Detector {
         Ok(())
     }
 
+    /// The strips' agreement at the summit nearest a vanishing direction, on the last
+    /// image, and that summit's distance from their answer ([`StripsRows::agreement_near`]);
+    /// `None` unless the strips method ran.
+    pub fn strips_agreement_near(&mut self, dir: &Vector3<f64>) -> Option<(f64, f64)> {
+        self.strips.as_mut()?.agreement_near(dir)
+    }
+
     /// What the strips method found in the last image (`None` unless it is the method).
     pub fn last_strips(&self) -> Option<StripsResult> {
         self.strips.as_ref().map(|s| s.last())

@@ -503,6 +503,10 @@ const NEIGHBOURS: [(f64, f64); 8] = [
     (1.0, 1.0),
 ];
 
+/// The most rounds of halving steps [`StripsRows::agreement_near`] climbs (each moves the
+/// point less than `search_step_px` along each axis).
+const CLIMB_ROUNDS: usize = 8;
+
 /// The most strips and profile bins an image may have (a hostile calibration or image
 /// cannot make the buffers grow without bound).
 const MAX_STRIPS: usize = 4096;
@@ -928,6 +932,41 @@ impl StripsRows {
             p1 = p1.max(p);
         }
         Some([a0, a1, p0, p1])
+    }
+
+    /// The agreement at the summit nearest a vanishing direction `dir` (sign free), on the
+    /// last image's peaks as the search read them: climbed from its point in the virtual
+    /// image by the search's own halving steps, again while the climb moves (at most
+    /// `CLIMB_ROUNDS` rounds). Asks, after [`Self::find`], whether a vanishing point known
+    /// from elsewhere (the labels') would have beaten the search's answer
+    /// ([`StripsResult::agreement`]): higher and elsewhere, the search missed it; lower, or
+    /// the search's own summit, the measure prefers the search's. Returns the agreement and
+    /// the summit's distance from the search's answer (virtual image pixels; infinite
+    /// without one). `None` before the first image, with too few peaks, or when the
+    /// direction has no point in the virtual image. Leaves [`Self::last`] as it was.
+    pub fn agreement_near(&mut self, dir: &Vector3<f64>) -> Option<(f64, f64)> {
+        let d = if dir.z < 0.0 { *dir } else { -*dir };
+        let [mut a, mut p] = self.to_virtual(&d)?;
+        let last = self.last;
+        self.read_peaks(None);
+        if self.peaks.len() < 4 {
+            self.last = last;
+            return None;
+        }
+        let sig = self.sigma_at(1.0);
+        let mut here = (self.agreement(a, p, sig), a, p);
+        for _ in 0..CLIMB_ROUNDS {
+            here = self.refine(here, self.opts.search_step_px);
+            if (here.1, here.2) == (a, p) {
+                break;
+            }
+            (a, p) = (here.1, here.2);
+        }
+        self.last = last;
+        let away = last
+            .vanishing_px
+            .map_or(f64::INFINITY, |[va, vp]| (here.1 - va).hypot(here.2 - vp));
+        Some((here.0, away))
     }
 
     /// Narrows the next searches to a prior's window (`vp` the expected vanishing point,
@@ -1476,6 +1515,9 @@ mod tests {
         }
     }
 
+    /// Two climbs to one summit end within this many pixels of each other.
+    const SAME_SUMMIT_TEST_PX: f64 = 3.0;
+
     fn forward_camera() -> Mounting {
         Mounting {
             pitch_deg: -47.0,
@@ -1619,6 +1661,39 @@ mod tests {
                 assert!(a.normal.dot(&b.normal).abs() < 0.9999, "duplicate rows");
             }
         }
+    }
+
+    #[test]
+    fn the_agreement_near_a_point_climbs_to_its_summit_and_leaves_the_result() {
+        let m = forward_camera();
+        let fld = field(300.0, 512.0, &m, 0.5, 0.1, 5f64.to_radians());
+        let mut s = StripsRows::new(StripsOptions::default(), 15.0, &m).unwrap();
+        let ray = Vector3::new(0.0, 0.0, -1.0);
+        assert_eq!(s.agreement_near(&ray), None, "no image yet");
+        let mut rows = Vec::new();
+        let vp = s
+            .find(&fld.rays, &fld.weights, &fld.pixel_rad, &mut rows)
+            .unwrap()
+            .expect("a vanishing point");
+        let found = s.last();
+        // from the answer and from 5 px beside it: the search's own summit
+        for (da, dp) in [(0.0, 0.0), (5.0, -4.0)] {
+            let [a, p] = found.vanishing_px.unwrap();
+            let start = s.to_ray(a + da, p + dp);
+            let (e, away) = s.agreement_near(&start).unwrap();
+            assert!(away <= SAME_SUMMIT_TEST_PX, "{away} px from the answer");
+            assert!((e / found.agreement - 1.0).abs() < 0.02, "{e} {found:?}");
+        }
+        assert_eq!(s.last(), found, "the result stays the search's");
+        // the point of a direction 20° above the rows': a lower summit of its own
+        let up = Rotation3::from_axis_angle(&Vector3::x_axis(), 20f64.to_radians()) * vp;
+        let (e, away) = s.agreement_near(&up).unwrap();
+        assert!(e < 0.5 * found.agreement, "{e} {found:?}");
+        assert!(away > 50.0, "{away}");
+        // the next image starts from its own peaks: the same answer again
+        s.find(&fld.rays, &fld.weights, &fld.pixel_rad, &mut rows)
+            .unwrap();
+        assert_eq!(s.last(), found);
     }
 
     #[test]

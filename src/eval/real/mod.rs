@@ -21,6 +21,7 @@ use crate::detect::{DetectError, Detection, Detector, DetectorOptions, Method};
 use crate::estimate::Estimate;
 use crate::frame::{Frame, ImageView, PixelFormat};
 use crate::guidance::{Guidance, GuidanceOptions, RowFit, RowFitOptions};
+use nalgebra::Vector3;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -90,6 +91,36 @@ pub struct RealOutcome {
     pub label_fits: Vec<LabelFit>,
     /// The labelled rows each ceiling's rows find (docs/real.md, "Ceilings").
     pub ceiling: Ceiling,
+    /// The strips method's measure at its own answer and near the labels' vanishing point
+    /// (docs/real.md, "Search or measure"); `null` for the other methods or without either
+    /// point.
+    pub vp_agreement: Option<VpAgreement>,
+}
+
+/// The strips' agreement (the measure their search maximises) at the search's answer and at
+/// the summit nearest the labels' vanishing point
+/// ([`crate::detect::strips::StripsRows::agreement_near`]), and how far that summit lies
+/// from the search's answer (pixels of the strips' virtual image). Where the vanishing point
+/// is far off, a higher summit elsewhere says the search missed it; a lower one, or the
+/// search's own (the climb from the labels' point may end there), that the measure itself
+/// prefers the wrong point.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct VpAgreement {
+    pub search: f64,
+    pub labels: f64,
+    pub labels_summit_from_search_px: f64,
+}
+
+/// Two climbs that end this close (virtual image pixels) reached the same summit: the
+/// search and the climb stop at 1 px steps from different starts.
+pub const SAME_SUMMIT_PX: f64 = 3.0;
+
+impl VpAgreement {
+    /// Whether the search missed a summit, away from its answer, that the measure rates
+    /// higher than that answer.
+    pub fn search_missed(&self) -> bool {
+        self.labels > self.search && self.labels_summit_from_search_px > SAME_SUMMIT_PX
+    }
 }
 
 impl RealOutcome {
@@ -112,6 +143,7 @@ impl RealOutcome {
             vanishing_point: None,
             label_fits: Vec::new(),
             ceiling: Ceiling::default(),
+            vp_agreement: None,
         }
     }
 }
@@ -235,6 +267,19 @@ pub fn run(
 /// fit and a fresh tracker, each frame's search narrowed by the tracker's prediction as the
 /// node's pipeline does ([`crate::pipeline::NarrowSearch`]); `det` holds the last frame's
 /// detection. Returns `n`.
+/// The strips' agreement at their answer and near the labels' vanishing direction, when the
+/// strips method found a vanishing point on the last image.
+fn vp_agreement(detector: &mut Detector, labels_vp: Option<&Vector3<f64>>) -> Option<VpAgreement> {
+    let search = detector.last_strips()?;
+    search.vanishing_px?;
+    let (labels, away) = detector.strips_agreement_near(labels_vp?)?;
+    Some(VpAgreement {
+        search: search.agreement,
+        labels,
+        labels_summit_from_search_px: away,
+    })
+}
+
 fn detect_tracked(
     cal: &Calibration,
     detector: &mut Detector,
@@ -343,6 +388,8 @@ fn score_one(
     }
     let detected = det.vanishing_point.map(|v| v.direction);
     o.ceiling = Ceiling::compute(cal, &labels, detected.as_ref(), &opts.score);
+    let labels_vp = o.vp_labels_px.map(|[r, c]| cal.model.cam2world(r, c));
+    o.vp_agreement = vp_agreement(detector, labels_vp.as_ref());
     if let (Some(a), Some(b)) = (o.vp_labels_px, o.vp_detected_px) {
         o.vp_error_px = Some((a[0] - b[0]).hypot(a[1] - b[1]));
     }

@@ -49,7 +49,17 @@ pub struct Summary {
     /// The ceilings (docs/real.md, "Ceilings"): each labelled row's own best great circle,
     /// the best through the detector's vanishing point, the best through the labels'.
     pub ceilings: [CeilingFigures; 3],
+    /// The images where the strips' measure was read at both points (`vp_agreement`), and
+    /// of those whose vanishing point is more than [`FAR_VP_PX`] off: how many, those where
+    /// the measure prefers the detector's point, and those where the search missed a higher
+    /// summit near the labels'.
+    pub vp_read: usize,
+    pub far_vp: [usize; 3],
 }
+
+/// A vanishing point this far from the labels' (pixels) counts as far off in the report's
+/// "search or measure" table.
+pub const FAR_VP_PX: f64 = 20.0;
 
 /// One ceiling over the scored images where it exists: those images, their labelled rows,
 /// the rows the ceiling finds and those the detector found there.
@@ -111,6 +121,15 @@ impl Summary {
             CeilingFigures::of(scored().map(|o| (o, o.ceiling.detected_vp))),
             CeilingFigures::of(scored().map(|o| (o, o.ceiling.labels_vp))),
         ];
+        let vp_read = ok.iter().filter(|o| o.vp_agreement.is_some()).count();
+        let mut far_vp = [0; 3];
+        let far = ok
+            .iter()
+            .filter(|o| o.vp_error_px.is_some_and(|e| e > FAR_VP_PX));
+        for a in far.filter_map(|o| o.vp_agreement) {
+            far_vp[0] += 1;
+            far_vp[if a.search_missed() { 2 } else { 1 }] += 1;
+        }
         Summary {
             images: outcomes.len(),
             errors: outcomes.len() - ok.len(),
@@ -133,6 +152,8 @@ impl Summary {
             missed,
             nearly_missed_where,
             ceilings,
+            vp_read,
+            far_vp,
         }
     }
 }
@@ -241,6 +262,14 @@ pub fn markdown(r: &RealResults, command: &str, worst_n: usize) -> String {
         );
     }
     md.push('\n');
+    if s.vp_read > 0 {
+        let [n, measure, search] = s.far_vp;
+        let _ = writeln!(
+            md,
+            "Whose fault a far-off vanishing point is: the strips' measure (docs/real.md, \"Search or measure\"; `vp_agreement` in outcomes.jsonl) at the summit nearest the labels' point against the search's answer, on the images where both were read:\n\n| images | more than {FAR_VP_PX} px off | the measure prefers the detector's point | the search missed a higher summit |\n|---|---|---|---|\n| {} | {n} | {measure} | {search} |\n",
+            s.vp_read
+        );
+    }
     let _ = writeln!(
         md,
         "## The {worst_n} worst images\n\nOverlays in `overlays/`: labelled rows green, published rows in their method's colour, the labels' vanishing point a green cross, the detector's yellow.\n\n| image | score | labelled | found | published in band | published | VP error (px) | error |\n|---|---|---|---|---|---|---|---|"
@@ -395,5 +424,37 @@ mod tests {
         assert_eq!(s.precision, 1.0);
         assert_eq!(s.score_mean, 0.75);
         assert_eq!(worst(&v, 2), vec![2, 0]);
+    }
+
+    #[test]
+    fn far_vanishing_points_are_put_down_to_the_search_or_the_measure() {
+        let with = |err: f64, labels: f64, away: f64| {
+            let mut o = outcome(Some(0.5), None);
+            o.vp_error_px = Some(err);
+            o.vp_agreement = Some(super::super::VpAgreement {
+                search: 1.0,
+                labels,
+                labels_summit_from_search_px: away,
+            });
+            o
+        };
+        let mut near_without = outcome(Some(0.5), None);
+        near_without.vp_error_px = Some(50.0);
+        let v = vec![
+            with(5.0, 2.0, 40.0),  // near the labels: not counted
+            with(30.0, 2.0, 40.0), // a higher summit elsewhere: the search missed it
+            with(30.0, 0.5, 40.0), // lower: the measure prefers the detector's point
+            with(30.0, 1.01, 1.0), // the search's own summit, climbed to from the labels'
+            near_without,          // no agreement read: not counted
+        ];
+        let s = Summary::of(&v);
+        assert_eq!((s.vp_read, s.far_vp), (4, [3, 2, 1]));
+        let r = RealResults {
+            outcomes: v,
+            method: Method::Strips,
+            requested: Method::Auto,
+        };
+        let md = markdown(&r, "omnirow eval real", 2);
+        assert!(md.contains("| 4 | 3 | 2 | 1 |"), "{md}");
     }
 }
