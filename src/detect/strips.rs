@@ -942,9 +942,13 @@ impl StripsRows {
     /// ([`StripsResult::agreement`]): higher and elsewhere, the search missed it; lower, or
     /// the search's own summit, the measure prefers the search's. Returns the agreement and
     /// the summit's distance from the search's answer (virtual image pixels; infinite
-    /// without one). `None` before the first image, with too few peaks, or when the
-    /// direction has no point in the virtual image. Leaves [`Self::last`] as it was.
+    /// without one). `None` before the first image, when the last image gave too few peaks
+    /// (its points may then not have been read), or when the direction has no point in the
+    /// virtual image. Leaves [`Self::last`] as it was.
     pub fn agreement_near(&mut self, dir: &Vector3<f64>) -> Option<(f64, f64)> {
+        if self.last.peaks < 4 {
+            return None;
+        }
         let d = if dir.z < 0.0 { *dir } else { -*dir };
         let [mut a, mut p] = self.to_virtual(&d)?;
         let last = self.last;
