@@ -952,11 +952,8 @@ impl StripsRows {
         let d = if dir.z < 0.0 { *dir } else { -*dir };
         let [mut a, mut p] = self.to_virtual(&d)?;
         let last = self.last;
+        // the same points as the search's: the same peaks, at least four of them
         self.read_peaks(None);
-        if self.peaks.len() < 4 {
-            self.last = last;
-            return None;
-        }
         let sig = self.sigma_at(1.0);
         let mut here = (self.agreement(a, p, sig), a, p);
         for _ in 0..CLIMB_ROUNDS {
@@ -1255,8 +1252,8 @@ impl StripsRows {
     }
 
     /// The line a = c₀ + c₁·d (d = depth below p) fitted by least squares to the peaks `on`
-    /// (weight 1 each, as every scan line of a labelled row counts once) and to the point (a, p) itself (d = 0, weight `own_line_anchor` × their
-    /// count): (c₀, c₁). `None` when they lie in fewer than `min_strips_floor` strips (at
+    /// (weight 1 each, as every scan line of a labelled row counts once) and to the point
+    /// (a, p) itself (d = 0, weight `own_line_anchor` × their count): (c₀, c₁). `None` when they lie in fewer than `min_strips_floor` strips (at
     /// least 3).
     fn line_fit(&self, a: f64, p: f64, on: impl Fn(&Peak) -> bool) -> Option<(f64, f64)> {
         let o = &self.opts;

@@ -263,10 +263,6 @@ pub fn run(
     })
 }
 
-/// Runs `img` as `n` frames at 15 fps of a robot standing still through `detector`, the row
-/// fit and a fresh tracker, each frame's search narrowed by the tracker's prediction as the
-/// node's pipeline does ([`crate::pipeline::NarrowSearch`]); `det` holds the last frame's
-/// detection. Returns `n`.
 /// The strips' agreement at their answer and near the labels' vanishing direction, when the
 /// strips method found a vanishing point on the last image.
 fn vp_agreement(detector: &mut Detector, labels_vp: Option<&Vector3<f64>>) -> Option<VpAgreement> {
@@ -280,6 +276,10 @@ fn vp_agreement(detector: &mut Detector, labels_vp: Option<&Vector3<f64>>) -> Op
     })
 }
 
+/// Runs `img` as `n` frames at 15 fps of a robot standing still through `detector`, the row
+/// fit and a fresh tracker, each frame's search narrowed by the tracker's prediction as the
+/// node's pipeline does ([`crate::pipeline::NarrowSearch`]); `det` holds the last frame's
+/// detection. Returns `n`.
 fn detect_tracked(
     cal: &Calibration,
     detector: &mut Detector,
