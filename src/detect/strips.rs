@@ -54,8 +54,23 @@ pub struct StripsOptions {
     pub peak_sigma_px: f64,
     /// Step of the coarse grid of candidate vanishing points (then halved to 1 px).
     pub search_step_px: f64,
-    /// How many of the coarse grid's best local maxima are refined to 1 px.
+    /// How many of the coarse grid's best local maxima are refined to 1 px. The highest
+    /// summit they climb to is the answer, unless the comb breaks a near tie
+    /// (`search_comb_power`).
     pub search_starts: usize,
+    /// The climbed summits within `search_comb_reach_px` of the highest are ranked by their
+    /// agreement times the comb's strength there (the peaks' strongest Fourier component in
+    /// u, 0..1) to this power; 0 ranks by the agreement alone. Crop rows are evenly spaced on
+    /// the ground, so of two nearby summits that the pairs' agreement nearly ties — on real
+    /// fields the near field's big plants line up from a point above the rows' as well as
+    /// from theirs — the rows' own is the one from which the peaks form the stronger comb.
+    /// The power is small: the comb only breaks ties (0.25: a summit needs a comb 2× as
+    /// strong to beat one 19 % higher).
+    pub search_comb_power: f64,
+    /// How far from the highest summit (virtual image pixels) another may win by its comb:
+    /// farther summits are other structures (a hedge, tramlines seen from the side), whose
+    /// lines can look evenly spaced too.
+    pub search_comb_reach_px: f64,
     /// The grid is first evaluated at twice its step, and then in full only within one
     /// coarse step of that coarser grid's this many best local maxima (0: the whole grid).
     pub search_regions: usize,
@@ -142,7 +157,9 @@ impl Default for StripsOptions {
             peak_fraction: 0.15,
             peak_sigma_px: 4.0,
             search_step_px: 8.0,
-            search_starts: 1,
+            search_starts: 3,
+            search_comb_power: 0.25,
+            search_comb_reach_px: 100.0,
             search_regions: 6,
             search_coarse_share: 1.0,
             search_blur: 0.0,
@@ -238,6 +255,18 @@ impl StripsOptions {
             return bad(&format!(
                 "search_starts = {} must be within 1..=64",
                 self.search_starts
+            ));
+        }
+        if !(self.search_comb_power.is_finite() && (0.0..=4.0).contains(&self.search_comb_power)) {
+            return bad(&format!(
+                "search_comb_power = {} must be within 0..=4",
+                self.search_comb_power
+            ));
+        }
+        if !(pos(self.search_comb_reach_px) && self.search_comb_reach_px <= 10000.0) {
+            return bad(&format!(
+                "search_comb_reach_px = {} must be within (0, 10000]",
+                self.search_comb_reach_px
             ));
         }
         if !(pos(self.search_coarse_share) && self.search_coarse_share <= 1.0) {
@@ -877,15 +906,25 @@ impl StripsRows {
                 return None;
             }
         }
-        let mut best = (f64::MIN, 0.0, 0.0);
+        // each start climbed, in place: (agreement, along, below)
         for k in 0..self.starts.len() {
             let (e, i, j) = self.starts[k];
-            let here = self.refine((e, a0 + i * step, p0 + j * step), step);
-            if here.0 > best.0 {
-                best = here;
-            }
+            self.starts[k] = self.refine((e, a0 + i * step, p0 + j * step), step);
         }
-        (best.0 > 0.0).then_some((best.1, best.2, best.0))
+        let summits = std::mem::take(&mut self.starts);
+        let (power, reach) = (self.opts.search_comb_power, self.opts.search_comb_reach_px);
+        let best = pick_summit(&summits, power, reach, |a, p| self.comb_strength_at(a, p));
+        self.starts = summits;
+        best.filter(|b| b.0 > 0.0).map(|b| (b.1, b.2, b.0))
+    }
+
+    /// The comb's strength (0..1) seen from (a, p), with the kernel of the comb's rows.
+    fn comb_strength_at(&mut self, a: f64, p: f64) -> f64 {
+        self.see(a, p, self.opts.peak_sigma_px);
+        if self.columns.len() == 0 {
+            return 0.0;
+        }
+        self.comb().0.max(0.0)
     }
 
     /// A grid point (agreement, along, below) climbed by halving steps from `step` / 2
@@ -1420,6 +1459,38 @@ fn sort_key(u: f64, i: usize) -> u64 {
     ((ordered as u64) << 32) | (i as u64 & 0xffff_ffff)
 }
 
+/// The search's answer among the climbed `summits` (agreement, along, below): the highest,
+/// or one within `reach` of it whose agreement times `strength(along, below)` (0..1) to the
+/// `power` is larger. With power 0, or one summit, the highest (the first of equals);
+/// `strength` is read only for summits that could win. `None` without summits.
+fn pick_summit(
+    summits: &[(f64, f64, f64)],
+    power: f64,
+    reach: f64,
+    mut strength: impl FnMut(f64, f64) -> f64,
+) -> Option<(f64, f64, f64)> {
+    let top = summits
+        .iter()
+        .copied()
+        .reduce(|b, x| if x.0 > b.0 { x } else { b })?;
+    if power == 0.0 || summits.len() < 2 {
+        return Some(top);
+    }
+    let mut best = (top, top.0 * strength(top.1, top.2).powf(power));
+    for &x in summits {
+        // a strength is at most 1: a summit no higher than the best score cannot win
+        let near = (x.1 - top.1).hypot(x.2 - top.2) <= reach;
+        if x == top || !near || x.0 <= best.1 {
+            continue;
+        }
+        let score = x.0 * strength(x.1, x.2).powf(power);
+        if score > best.1 {
+            best = (x, score);
+        }
+    }
+    Some(best.0)
+}
+
 /// How many different strips the peaks come from.
 fn distinct_strips(on: &[u32]) -> usize {
     let mut n = 0;
@@ -1821,6 +1892,33 @@ mod tests {
     }
 
     #[test]
+    fn the_comb_breaks_only_near_ties_and_only_nearby() {
+        // (agreement, along, below); the comb's strength by position
+        let summits = [(1.0, 0.0, 0.0), (0.95, 30.0, -40.0), (0.97, 300.0, 0.0)];
+        let comb = |a: f64, _p: f64| if a == 0.0 { 0.5 } else { 1.0 };
+        let pick = |power, reach| pick_summit(&summits, power, reach, comb).unwrap();
+        // the agreement alone: the highest
+        assert_eq!(pick(0.0, 100.0), summits[0]);
+        // 0.95 × 1 > 1 × 0.5^0.25 = 0.84: the nearby summit with the stronger comb wins
+        assert_eq!(pick(0.25, 100.0), summits[1]);
+        // out of reach it cannot, however strong its comb
+        assert_eq!(pick(0.25, 40.0), summits[0]);
+        // a summit far below the highest never wins: 0.5 × 1 < 1 × 0.5^0.25
+        let low = [(1.0, 0.0, 0.0), (0.5, 10.0, 0.0)];
+        assert_eq!(pick_summit(&low, 0.25, 100.0, comb).unwrap(), low[0]);
+        // its comb is not even read: a strength is at most 1
+        let mut read = vec![];
+        pick_summit(&low, 0.25, 100.0, |a, p| {
+            read.push((a, p));
+            comb(a, p)
+        });
+        assert_eq!(read, [(0.0, 0.0)]);
+        // one summit, or none
+        assert_eq!(pick_summit(&low[..1], 0.25, 100.0, comb), Some(low[0]));
+        assert_eq!(pick_summit(&[], 0.25, 100.0, comb), None);
+    }
+
+    #[test]
     fn a_window_narrows_the_search_and_a_window_beside_the_rows_finds_nothing() {
         let (vp_full, n_full) = search_with(StripsOptions::default(), None);
         let w = 2f64.to_radians();
@@ -2147,6 +2245,20 @@ mod tests {
     #[test]
     fn bad_options_are_named() {
         for (o, key) in [
+            (
+                StripsOptions {
+                    search_comb_power: -1.0,
+                    ..StripsOptions::default()
+                },
+                "search_comb_power",
+            ),
+            (
+                StripsOptions {
+                    search_comb_reach_px: 0.0,
+                    ..StripsOptions::default()
+                },
+                "search_comb_reach_px",
+            ),
             (
                 StripsOptions {
                     own_line_anchor: -0.1,
