@@ -508,6 +508,8 @@ pub struct StripsRows {
     grid: Vec<f64>,
     /// The prior's vanishing point (unit) and window half-angle, when narrowed.
     prior: Option<(Vector3<f64>, f64)>,
+    /// The grid's local maxima (agreement, column, row), best first; in the search, once
+    /// climbed, its summits (agreement, along, below).
     starts: Vec<(f64, f64, f64)>,
     /// The peaks below the last candidate, for the agreement's pair sums and the comb.
     columns: SeenColumns,
@@ -861,7 +863,8 @@ impl StripsRows {
 
     /// The vanishing point whose pencil lines the strips' peaks up best: a coarse grid over
     /// the window (or the prior's box within it, [`Self::set_window`]), then halving steps
-    /// around the best. (along, below, agreement). With a prior, `None` also when the box's
+    /// from its `search_starts` best points, and of the summits they reach the highest or
+    /// a nearby one with a stronger comb ([`pick_summit`]). (along, below, agreement). With a prior, `None` also when the box's
     /// best lies on an edge the box adds to the window: the agreement still rises beyond
     /// it, so the rows' vanishing point is outside the prior's window.
     fn search(&mut self) -> Option<(f64, f64, f64)> {
