@@ -358,8 +358,8 @@ fn crdld_default_method_holds_on_every_tenth_image() {
         assert!(o.iter().all(|v| v["error"].is_null()));
         let (recall, precision, score) = pooled(&o);
         // measured 0.660 / 0.674 / 0.497 at f = 300 px (0.498 before the comb broke the
-        // search's near ties; f = 900 px 0.676 / 0.693 → 0.680 / 0.697; each row on its own line and the
-        // polish's band 6° at the reference resolution instead of 16°: 0.648 / 0.658 / 0.482;
+        // search's near ties; f = 900 px 0.676 / 0.693 → 0.680 / 0.697; each row on its own
+        // line and the polish's band 6° at the reference resolution instead of 16°: 0.648 / 0.658 / 0.482;
         // with the threshold's floor 10
         // instead of the strips' 7 and prominence within 12 px: 0.631 / 0.678 / 0.500, and
         // 0.652 / 0.674 / 0.493 before the straightened peaks; keeping 15000 points instead of

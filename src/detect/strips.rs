@@ -863,10 +863,11 @@ impl StripsRows {
 
     /// The vanishing point whose pencil lines the strips' peaks up best: a coarse grid over
     /// the window (or the prior's box within it, [`Self::set_window`]), then halving steps
-    /// from its `search_starts` best points, and of the summits they reach the highest or
-    /// a nearby one with a stronger comb ([`pick_summit`]). (along, below, agreement). With a prior, `None` also when the box's
-    /// best lies on an edge the box adds to the window: the agreement still rises beyond
-    /// it, so the rows' vanishing point is outside the prior's window.
+    /// from its `search_starts` best points, and of the summits they reach the highest or a
+    /// nearby one with a stronger comb ([`pick_summit`]). (along, below, agreement). With a
+    /// prior, `None` also when the box's best lies on an edge the box adds to the window:
+    /// the agreement still rises beyond it, so the rows' vanishing point is outside the
+    /// prior's window.
     fn search(&mut self) -> Option<(f64, f64, f64)> {
         if self.peaks.len() < 4 {
             return None;
@@ -916,18 +917,18 @@ impl StripsRows {
         }
         let summits = std::mem::take(&mut self.starts);
         let (power, reach) = (self.opts.search_comb_power, self.opts.search_comb_reach_px);
-        let best = pick_summit(&summits, power, reach, |a, p| self.comb_strength_at(a, p));
+        let best = pick_summit(&summits, power, reach, |a, p| {
+            self.comb_at(a, p).map_or(0.0, |c| c.0.max(0.0))
+        });
         self.starts = summits;
         best.filter(|b| b.0 > 0.0).map(|b| (b.1, b.2, b.0))
     }
 
-    /// The comb's strength (0..1) seen from (a, p), with the kernel of the comb's rows.
-    fn comb_strength_at(&mut self, a: f64, p: f64) -> f64 {
+    /// The peaks' comb seen from (a, p) ([`Self::comb`], with `self.columns` filled for
+    /// it, the kernel of the comb's rows); `None` when no peak lies below the point.
+    fn comb_at(&mut self, a: f64, p: f64) -> Option<(f64, f64, f64)> {
         self.see(a, p, self.opts.peak_sigma_px);
-        if self.columns.len() == 0 {
-            return 0.0;
-        }
-        self.comb().0.max(0.0)
+        (self.columns.len() > 0).then(|| self.comb())
     }
 
     /// A grid point (agreement, along, below) climbed by halving steps from `step` / 2
@@ -1202,13 +1203,10 @@ impl StripsRows {
 
     /// The comb of the peaks' u seen from (a, p) and its teeth as rows into `rows`.
     fn comb_rows(&mut self, a: f64, p: f64, rows: &mut Vec<Row>) {
-        self.see(a, p, self.opts.peak_sigma_px);
-        if self.columns.len() == 0 {
+        let Some((amp, period, phase)) = self.comb_at(a, p) else {
             return;
-        }
+        };
         let o = self.opts;
-        let best = self.comb();
-        let (amp, period, phase) = best;
         self.last.period = period;
         self.last.comb_strength = amp;
         let c = &self.columns;
@@ -1295,8 +1293,8 @@ impl StripsRows {
 
     /// The line a = c₀ + c₁·d (d = depth below p) fitted by least squares to the peaks `on`
     /// (weight 1 each, as every scan line of a labelled row counts once) and to the point
-    /// (a, p) itself (d = 0, weight `own_line_anchor` × their count): (c₀, c₁). `None` when they lie in fewer than `min_strips_floor` strips (at
-    /// least 3).
+    /// (a, p) itself (d = 0, weight `own_line_anchor` × their count): (c₀, c₁). `None` when
+    /// they lie in fewer than `min_strips_floor` strips (at least 3).
     fn line_fit(&self, a: f64, p: f64, on: impl Fn(&Peak) -> bool) -> Option<(f64, f64)> {
         let o = &self.opts;
         let (mut n, mut sd, mut sa, mut strips) = (0.0, 0.0, 0.0, 0usize);
