@@ -331,6 +331,16 @@ fn eval_guidance_writes_its_table_and_plots() {
         std::fs::read_to_string(dir.join("README.md")).unwrap(),
         table
     );
+    // every frame of every drive, in order, with its truth
+    let frames = std::fs::read_to_string(dir.join("frames.jsonl")).unwrap();
+    let frames: Vec<serde_json::Value> = frames
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(frames.len(), 4 * 6, "{frames:?}");
+    assert_eq!(frames[6]["drive"], "crossing");
+    assert!(frames[7]["frame"]["time_s"].as_f64().unwrap() > 0.0);
+    assert!(frames[7]["frame"]["truth_offset_m"].is_f64());
     let bad = bin()
         .args(["eval", "guidance", "--seconds", "0"])
         .output()

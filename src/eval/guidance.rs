@@ -134,8 +134,21 @@ pub struct DriveScore {
     /// Frames with no plant within 3 m (truth), and those of them reported as not `rows`.
     pub empty_frames: usize,
     pub empty_reported: usize,
-    /// (time s, truth offset, estimated offset) for the plot.
-    pub series: Vec<(f64, f64, Option<f64>)>,
+    /// Every frame: the plot's series and `frames.jsonl`.
+    pub series: Vec<FrameScore>,
+}
+
+/// One frame of a drive: the truth and what guidance published.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct FrameScore {
+    pub time_s: f64,
+    /// The truth's offset from the start's inter-row path (metres).
+    pub truth_offset_m: f64,
+    /// The published offset from the followed line (`None`: no offset this frame).
+    pub offset_m: Option<f64>,
+    /// The truth's and the published heading relative to the rows (radians).
+    pub truth_heading_rad: f64,
+    pub heading_rad: Option<f64>,
 }
 
 /// The p-quantile of `v` (sorted in place), 0 when empty.
@@ -204,7 +217,13 @@ pub fn run_drive(
         let path = *start_path.get_or_insert(t.path());
         let truth_off = t.path_offset_m(path);
         let time = seq as f64 / s.drive.fps;
-        score.series.push((time, truth_off, g.lateral_offset_m));
+        score.series.push(FrameScore {
+            time_s: time,
+            truth_offset_m: truth_off,
+            offset_m: g.lateral_offset_m,
+            truth_heading_rad: t.heading_rad,
+            heading_rad: g.heading_rad,
+        });
         let own = est.row_fit.as_ref();
         tracing::trace!(
             drive = s.name,
@@ -312,8 +331,9 @@ pub fn markdown(scores: &[DriveScore], command: &str) -> String {
     s
 }
 
-/// Writes README.md (the table) and one PNG per drive (offset, truth and estimate over
-/// time) into `dir`; the files written.
+/// Writes README.md (the table), frames.jsonl (every frame of every drive, a
+/// [`FrameScore`] with its drive's name) and one PNG per drive (offset, truth and estimate
+/// over time) into `dir`; the files written.
 pub fn write(
     scores: &[DriveScore],
     dir: &Path,
@@ -328,6 +348,17 @@ pub fn write(
     let md = dir.join("README.md");
     std::fs::write(&md, markdown(scores, command)).map_err(io(&md))?;
     files.push(md);
+    let jsonl = dir.join("frames.jsonl");
+    let mut lines = String::new();
+    for d in scores {
+        for f in &d.series {
+            let line = serde_json::json!({ "drive": d.name, "frame": f });
+            lines += &line.to_string();
+            lines.push('\n');
+        }
+    }
+    std::fs::write(&jsonl, lines).map_err(io(&jsonl))?;
+    files.push(jsonl);
     for d in scores {
         let chart = Chart {
             title: format!("guidance: {} — offset from the followed line", d.name),
@@ -340,13 +371,17 @@ pub fn write(
                 Series {
                     label: "truth".into(),
                     colour: [40, 40, 40],
-                    points: d.series.iter().map(|p| (p.0, p.1)).collect(),
+                    points: d.series.iter().map(|p| (p.time_s, p.truth_offset_m)).collect(),
                     kind: Kind::Line,
                 },
                 Series {
                     label: "estimate".into(),
                     colour: [220, 60, 30],
-                    points: d.series.iter().filter_map(|p| Some((p.0, p.2?))).collect(),
+                    points: d
+                        .series
+                        .iter()
+                        .filter_map(|p| Some((p.time_s, p.offset_m?)))
+                        .collect(),
                     kind: Kind::Markers,
                 },
             ],
