@@ -9,10 +9,11 @@ mod common;
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use omnirow::camera::ideal_fisheye;
-use omnirow::detect::hough::HoughRows;
+use omnirow::detect::hough::{HoughParams, HoughRows};
 use omnirow::detect::mask::build_mask;
 use omnirow::detect::smooth::Gaussian;
 use omnirow::detect::threshold::keep_brightest;
+use omnirow::detect::vanishing::{VanishingParams, VanishingStage};
 use omnirow::detect::vegetation::vegetation_image;
 use omnirow::detect::{
     Detection, Detector, DetectorOptions, DetectorPrior, GreyImage, Method, Points, PriorOutcome,
@@ -85,7 +86,7 @@ fn bench(c: &mut Criterion) {
                     det.last_prior(),
                     out.rows.len(),
                     t.prepare.as_secs_f64() * 1e3,
-                    t.hough.as_secs_f64() * 1e3,
+                    t.rows.as_secs_f64() * 1e3,
                 );
             }
         }
@@ -127,12 +128,12 @@ fn bench(c: &mut Criterion) {
             b.iter(|| keep_brightest(&sm.data, &mask, &opts.threshold, &mut kept).unwrap())
         });
         let mut points = Points::default();
-        let mut prep = omnirow::detect::Preparer::new(&cal, &opts).unwrap();
+        let mut prep = omnirow::detect::Preparer::new(&cal, &opts.prepare()).unwrap();
         prep.run(&view, &mut points).unwrap();
         g.bench_function("prepare", |b| {
             b.iter(|| prep.run(&view, &mut points).unwrap())
         });
-        let mut hough = HoughRows::new(opts.hough).unwrap();
+        let mut hough = HoughRows::new(HoughParams::new(&opts.hough, 1.0)).unwrap();
         let mut rows = Vec::new();
         g.bench_function("hough", |b| {
             b.iter(|| {
@@ -147,9 +148,11 @@ fn bench(c: &mut Criterion) {
         // The detector refits with the first vanishing point of the Hough rows.
         let vp0 = out.vanishing_point.map(|v| v.direction);
         g.bench_function("refit", |b| {
-            b.iter(|| prep.refit(&mut rows2, &bands, vp0.as_ref(), false).unwrap())
+            b.iter(|| prep.refit(&mut rows2, &bands, vp0.as_ref()).unwrap())
         });
-        let mut vs = omnirow::detect::VanishingStage::new(&cal, &opts).unwrap();
+        let mut vs =
+            VanishingStage::new(VanishingParams::default(), opts.max_tilt_deg, &cal.mounting)
+                .unwrap();
         let mut d2 = Detection {
             rows: rows.clone(),
             ..Default::default()
@@ -168,7 +171,7 @@ fn bench(c: &mut Criterion) {
         let cpu_ms = thread_cpu_ns()
             .zip(cpu0)
             .map(|(b, a)| (b - a) as f64 / 30.0 / 1e6);
-        let med = |f: &dyn Fn(&omnirow::detect::detector::StageTimes) -> Duration| {
+        let med = |f: &dyn Fn(&omnirow::detect::StageTimes) -> Duration| {
             let mut v: Vec<f64> = times.iter().map(|t| f(t).as_secs_f64() * 1e3).collect();
             v.sort_by(f64::total_cmp);
             v[v.len() / 2]
@@ -176,7 +179,7 @@ fn bench(c: &mut Criterion) {
         println!(
             "{name} 2448x2050 breakdown (median wall ms): prepare {:.2}, hough + refit {:.2}, vanishing {:.3}, total {:.2}; CPU per frame {}; {} points, {} rows, VP {}",
             med(&|t| t.prepare),
-            med(&|t| t.hough),
+            med(&|t| t.rows),
             med(&|t| t.vanishing),
             med(&|t| t.total()),
             cpu_ms.map_or("unavailable".to_string(), |c| format!("{c:.2} ms")),
@@ -218,7 +221,7 @@ fn bench(c: &mut Criterion) {
                 .unwrap();
         });
         stage_cpu("refit", &mut || {
-            prep.refit(&mut rows2, &bands, vp0.as_ref(), false).unwrap();
+            prep.refit(&mut rows2, &bands, vp0.as_ref()).unwrap();
         });
         stage_cpu("vanishing", &mut || {
             vs.run(None, &mut d2).unwrap();

@@ -54,15 +54,13 @@ fn bench(c: &mut Criterion) {
                 cpu.1
             );
             eprintln!(
-                "{name} {}: prepare {:?} hough {:?} edge {:?} vanishing {:?} total {:?}; {} rows; {:?}",
+                "{name} {}: prepare {:?} rows {:?} vanishing {:?} total {:?}; {} rows",
                 method.name(),
                 t.prepare,
-                t.hough,
-                t.edge,
+                t.rows,
                 t.vanishing,
                 t.total(),
                 out.rows.len(),
-                det.last_edge()
             );
             if method == Method::Combined {
                 let (_, smoothed) = det.preparer().vegetation();

@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # Runs two omnirow binaries on the same inputs and compares their outputs outcome by
 # outcome: all CRDLD images at both focal-length guesses (`omnirow eval real`, when
-# ../shared/real-fields/crdld exists), `omnirow eval --quick` (Tables I and II) and
-# `omnirow eval guidance --seconds 10` (every frame). Timings are left out of the
-# comparison. A change that must not change what the detector finds (a restructuring, a
+# ../shared/real-fields/crdld exists: the strips method), `omnirow eval --quick` (Tables I
+# and II: the Hough, edge and combined methods), `omnirow eval guidance --seconds 10` (every
+# frame) and `omnirow detect` on 24 synthetic images through a narrow camera looking down
+# (the pencil method). Timings are left out of the comparison. A change that must not change what the detector finds (a restructuring, a
 # speed-up) passes when this prints "same outputs" and exits 0.
 #
 #   scripts/same-outputs.sh BEFORE_BINARY AFTER_BINARY [OUT_DIR]
@@ -18,9 +19,33 @@ after=$(realpath "$2")
 out=${3:-$(mktemp -d)}
 crdld=../shared/real-fields/crdld
 
+# A narrow perspective camera looking straight down, and its images (rendered once).
+down=$out/down
+mkdir -p "$down/image"
+cat > "$down/calib.toml" <<'TOML'
+[pinhole]
+width = 640
+height = 480
+fx = 500.0
+fy = 500.0
+cx = 319.5
+cy = 239.5
+[mounting]
+roll_deg = 0.0
+pitch_deg = 0.0
+yaw_deg = 0.0
+TOML
+for s in $(seq 1 24); do
+  random=table1
+  [ $((s % 2)) = 0 ] && random=table2
+  "$before" synth --calib "$down/calib.toml" --seed "$s" --random $random \
+    --out "$down/image/$s.png" >/dev/null 2>&1
+done
+
 run() { # binary, folder
   local bin=$1 dir=$2
   mkdir -p "$dir"
+  "$bin" detect --calib "$down/calib.toml" "$down"/image/*.png > "$dir/down.jsonl"
   if [ -d "$crdld/image" ]; then
     for f in 300 900; do
       "$bin" eval real --images "$crdld/image" --labels "$crdld/label" \
@@ -41,7 +66,7 @@ python3 - "$out/before" "$out/after" <<'PY'
 import json, os, sys
 
 before, after = sys.argv[1], sys.argv[2]
-TIMING = {"detect_ms"}
+TIMING = {"detect_ms", "elapsed_ms"}
 
 def strip(v):
     if isinstance(v, dict):

@@ -146,6 +146,12 @@ impl Config {
         // the spans of values only.
         let doc = ImDocument::parse(text).ok();
         let tables = doc.as_ref().map(ImDocument::as_table);
+        if let Some(t) = tables {
+            let removed = removed_detector_keys(t, text);
+            if !removed.is_empty() {
+                return Err(error(removed));
+            }
+        }
         let raw: RawConfig = toml::from_str(text).map_err(|e| {
             let at = e.span().map(|s| s.start);
             error(vec![Problem {
@@ -245,21 +251,51 @@ fn compose(raw: RawConfig, tables: Option<&Table>, c: &mut Check) -> Config {
 
 /// The detector's own checks, positioned at `[detector]`.
 fn check_detector(o: &DetectorOptions, at: Option<usize>, c: &mut Check) {
-    let checks = [
-        o.hough.validate(),
-        o.mask.validate(),
-        o.vanishing.validate(),
-    ];
-    for e in checks.into_iter().filter_map(Result::err) {
-        c.bad_at("detector".into(), at, e.to_string());
-    }
     if !(o.max_tilt_deg.is_finite() && (0.0..=45.0).contains(&o.max_tilt_deg)) {
         c.bad_at(
             "detector.max_tilt_deg".into(),
             at,
             format!("{} is out of range (0 ..= 45)", o.max_tilt_deg),
         );
+    } else if let Err(e) = o.validate() {
+        c.bad_at("detector".into(), at, e.to_string());
     }
+}
+
+/// The keys under `[detector]` that this version no longer reads
+/// ([`crate::detect::options::REMOVED`]), each with its line.
+fn removed_detector_keys(root: &Table, text: &str) -> Vec<Problem> {
+    fn walk(item: &Item, path: &mut Vec<String>, text: &str, found: &mut Vec<Problem>) {
+        let Some(t) = item.as_table_like() else {
+            return;
+        };
+        for (name, child) in t.iter() {
+            path.push(name.to_string());
+            let dotted = path.join(".");
+            if crate::detect::options::REMOVED.contains(&dotted.as_str()) {
+                let at = t
+                    .get_key_value(name)
+                    .and_then(|(k, _)| k.span())
+                    .map(|s| s.start);
+                found.push(Problem {
+                    line: at.map_or(0, |at| line_number(text, at)),
+                    key: format!("detector.{dotted}"),
+                    message: "this option was removed: its behaviour is fixed now \
+                              (`omnirow config detector` lists the options there are; \
+                              docs/detector.md)"
+                        .into(),
+                });
+            } else {
+                walk(child, path, text, found);
+            }
+            path.pop();
+        }
+    }
+    let mut found = Vec::new();
+    if let Some(d) = root.get("detector") {
+        walk(d, &mut Vec::new(), text, &mut found);
+    }
+    found
 }
 
 /// The 1-based line of a byte offset the parser reported.
@@ -374,6 +410,44 @@ mod tests {
     }
 
     #[test]
+    fn removed_detector_options_are_named_with_their_line() {
+        let e = err("[detector]\nmethod = \"hough\"\n[detector.refit]\nnear_reach_m = 1.0\nperspective = true\n\n[detector.hough]\nphi_bins = 60\n");
+        let found: Vec<(usize, &str)> = e
+            .problems
+            .iter()
+            .map(|p| (p.line, p.key.as_str()))
+            .collect();
+        assert_eq!(
+            found,
+            [
+                (5, "detector.refit.perspective"),
+                (8, "detector.hough.phi_bins")
+            ],
+            "{e}"
+        );
+        assert!(e.to_string().contains("was removed"), "{e}");
+        // dotted and inline spellings too
+        let e = err("[detector]\nrefit.wedge = true\nhough = { nms_radius = 3 }\n");
+        let keys: Vec<&str> = e.problems.iter().map(|p| p.key.as_str()).collect();
+        assert_eq!(
+            keys,
+            ["detector.refit.wedge", "detector.hough.nms_radius"],
+            "{e}"
+        );
+        // every removed key is refused by name, and none is still an option
+        for k in crate::detect::options::REMOVED {
+            let (table, key) = k.rsplit_once('.').map_or(("", *k), |(t, k)| (t, k));
+            let text = if table.is_empty() {
+                format!("[detector]\n{key} = 1\n")
+            } else {
+                format!("[detector.{table}]\n{key} = 1\n")
+            };
+            let e = err(&text);
+            assert_eq!(e.problems[0].key, format!("detector.{k}"), "{e}");
+        }
+    }
+
+    #[test]
     fn wrong_type_names_key_and_line() {
         let e = err("[source]\n\n[source.synthetic]\nfps = \"fast\"\n");
         assert_eq!(e.problems[0].line, 4, "{e}");
@@ -411,8 +485,9 @@ mod tests {
             (1, "detector.max_tilt_deg"),
             "{e}"
         );
-        let e = err("[detector.hough]\nphi_bins = 1\n");
+        let e = err("[detector.hough]\nmax_rows = 0\n");
         assert_eq!(e.problems[0].key, "detector", "{e}");
+        assert!(e.to_string().contains("hough.max_rows"), "{e}");
         let e = err("[detector]\nmethd = \"hough\"\n");
         assert_eq!(
             (e.problems[0].line, e.problems[0].key.as_str()),

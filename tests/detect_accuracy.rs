@@ -432,26 +432,22 @@ fn curved_rows_are_published_where_they_pass_the_robot() {
     }
 }
 
-/// Issue 13 §5: the edge method's centre lines (each the bisector of two boundaries) are
-/// refitted on the image's pixels between their boundaries, as the Hough rows are: on a
-/// straight field through the ideal fisheye and PAL at half resolution, the rows within 1 m of
-/// the robot lie closer to the truth than the bisectors do (`refit.enabled = false` keeps
-/// those); the vanishing point, found before, is the same.
+/// The edge method's centre lines (each the bisector of two boundaries) are refitted on the
+/// image's pixels between their boundaries, as the Hough rows are: on a straight field
+/// through the ideal fisheye and PAL at half resolution, the rows within 1 m of the robot
+/// lie closer to the truth than the bisectors themselves did (9.23 and 8.64 mrad, measured
+/// when the refit could be switched off).
 #[test]
 fn edge_centre_lines_are_refitted_on_their_pixels() {
     for (name, cal) in half_resolution_lenses() {
-        let refitted = DetectorOptions {
+        let edge = DetectorOptions {
             method: Method::Edge,
             ..Default::default()
         };
-        let mut bisectors = refitted.clone();
-        bisectors.refit.enabled = false;
-        let (e_fit, h_fit) = near_row_error(&cal, 0.0, refitted);
-        let (e_bis, h_bis) = near_row_error(&cal, 0.0, bisectors);
-        println!("{name}: edge rows beside the robot {e_fit:.3} mrad off (bisectors {e_bis:.3})");
-        // Measured: fisheye 6.79 against 9.23 mrad, PAL 7.08 against 8.64.
-        assert!(e_fit < 0.9 * e_bis, "{name}: {e_fit} vs {e_bis}");
-        assert_eq!(h_fit, h_bis, "{name}");
+        let (e_fit, _) = near_row_error(&cal, 0.0, edge);
+        println!("{name}: edge rows beside the robot {e_fit:.3} mrad off");
+        // Measured: fisheye 6.79, PAL 7.08 mrad.
+        assert!(e_fit < 7.8, "{name}: {e_fit}");
     }
 }
 

@@ -132,7 +132,7 @@ fn angles_that_follow_the_pixel_size_lose_rows_through_the_fine_lens() {
         .unwrap()
         .rescaled(4.0)
         .unwrap();
-    let (_, sc) = omnirow::detect::scale::resolve(&coarse, &DetectorOptions::default()).unwrap();
+    let (_, sc) = omnirow::detect::options::resolve(&coarse, &DetectorOptions::default()).unwrap();
     let mut lost = 0;
     for seed in 1..=3 {
         let c = compare(Method::Hough, Some(sc.factor / 4.0), seed);

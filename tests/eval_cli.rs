@@ -95,7 +95,9 @@ fn eval_writes_tables_plots_and_outcomes() {
 fn eval_rejects_unknown_methods_and_bad_lenses() {
     let run = omnirow(&["eval", "--quick", "--methods", "magic"]);
     assert!(!run.status.success());
-    assert!(String::from_utf8_lossy(&run.stderr).contains("unknown method 'magic'"));
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(err.contains("invalid value 'magic'"), "{err}");
+    assert!(err.contains("hough"), "{err}");
     let run = omnirow(&["eval", "--quick", "--lens", "/nonexistent/lens.txt"]);
     assert!(!run.status.success());
     assert!(String::from_utf8_lossy(&run.stderr).contains("/nonexistent/lens.txt"));

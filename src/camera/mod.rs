@@ -312,6 +312,23 @@ impl Calibration {
         }
     }
 
+    /// The pixel (row, col) of a direction (either sign): the sign whose pixel lies inside
+    /// the field of view, else inside the image, else `None`. A vanishing point, whose sign
+    /// is free, drawn or scored in the image.
+    pub fn direction_to_pixel(&self, dir: &Vector3<f64>) -> Option<[f64; 2]> {
+        for d in [*dir, -*dir] {
+            if let Some(p) = self.ray_to_pixel_in_fov(&d) {
+                return Some(p);
+            }
+        }
+        let (h, w) = (self.model.height as f64, self.model.width as f64);
+        [*dir, -*dir].iter().find_map(|d| {
+            self.model
+                .world2cam(d)
+                .filter(|p| p[0] >= -0.5 && p[1] >= -0.5 && p[0] < h - 0.5 && p[1] < w - 0.5)
+        })
+    }
+
     /// Whether a ray (camera frame) is inside the lens's field of view: the model describes
     /// it, it lands on the sensor, and inside the mask. Returns the pixel when it is.
     #[inline]

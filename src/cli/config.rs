@@ -1,6 +1,7 @@
 //! `omnirow config check FILE`, `omnirow config default` and `omnirow config detector`.
 
 use crate::config::Config;
+use crate::detect::options::{resolve, scales_report, OPTIONS};
 use clap::Subcommand;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -13,11 +14,12 @@ pub enum ConfigCommand {
     Check { file: PathBuf },
     /// Print the documented default configuration (config/omnirow.toml).
     Default,
-    /// Print every detector option with its default value, as a `[detector]` section to
-    /// paste into the configuration (or into an options file) and tune.
+    /// Print every detector option with its default value and a line saying what it does,
+    /// as a `[detector]` section to paste into the configuration and tune.
     Detector {
-        /// Also show, for this calibration, the angular resolution at the detector's working
-        /// resolution and each option's angle in pixels (and pixel length in degrees).
+        /// Show the values in force for this calibration instead (the method `auto` stands
+        /// for, the scales derived from its field of view), with its angular resolution and
+        /// each angular scale in pixels.
         #[arg(long, value_name = "FILE")]
         calib: Option<PathBuf>,
     },
@@ -47,11 +49,9 @@ pub fn run(cmd: ConfigCommand) -> anyhow::Result<ExitCode> {
             };
             let cal = crate::camera::Calibration::load(&path)?;
             let defaults = crate::detect::DetectorOptions::default();
-            let in_force = crate::detect::scale::resolve(&cal, &defaults)
-                .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?
-                .0;
-            let report = crate::detect::scale::scales_report(&cal, &defaults)
-                .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+            let at = |e: crate::detect::DetectError| anyhow::anyhow!("{}: {e}", path.display());
+            let in_force = resolve(&cal, &defaults).map_err(at)?.0;
+            let report = scales_report(&cal, &defaults).map_err(at)?;
             println!("# The detector's scales for {}:\n{report}", path.display());
             print!(
                 "{}",
@@ -59,8 +59,7 @@ pub fn run(cmd: ConfigCommand) -> anyhow::Result<ExitCode> {
                     &in_force,
                     &format!(
                         "# omnirow's detector options in force for {} (`omnirow config detector \
-                         --calib`):\n# the angular options derived from it are written out; \
-                         paste only what you mean to fix.\n",
+                         --calib`):\n# paste only what you mean to fix.\n",
                         path.display()
                     )
                 )?
@@ -75,24 +74,35 @@ pub fn detector_defaults() -> anyhow::Result<String> {
     detector_toml(
         &crate::detect::DetectorOptions::default(),
         "# omnirow's detector options and their defaults (`omnirow config detector`).\n\
-         # Paste into the node's configuration and keep only what you change.\n\
-         # Absent here, derived from the calibration's angular resolution unless set\n\
-         # (`omnirow config detector --calib FILE` shows their values in force): angle_scale,\n\
-         # hough.phi_bins, hough.theta_bins, hough.min_tolerance_deg, hough.merge_angle_deg,\n\
-         # vanishing.azimuth_bins, vanishing.elevation_bin_deg, vanishing.inlier_deg,\n\
-         # vanishing.min_spread_deg, combined.pair_max_deg, pencil.polish_max_band_deg,\n\
-         # edge.merge.max_angle_rad.\n",
+         # Paste into the node's configuration and keep only what you change; an option\n\
+         # commented out is derived from the calibration or the method unless set\n\
+         # (`omnirow config detector --calib FILE` shows the values in force).\n",
     )
 }
 
-/// `opts` as TOML tables under `[detector]`, after `header`.
+/// `opts` as TOML tables under `[detector]`, after `header`: every option of
+/// [`OPTIONS`] under its line of description, commented out where it is absent.
 fn detector_toml(opts: &crate::detect::DetectorOptions, header: &str) -> anyhow::Result<String> {
-    #[derive(serde::Serialize)]
-    struct Wrapper<'a> {
-        detector: &'a crate::detect::DetectorOptions,
+    let table: toml::Table = toml::Table::try_from(opts)?;
+    let mut out = format!("{header}\n[detector]\n");
+    let mut section = "";
+    for (key, doc) in OPTIONS {
+        let (sec, name) = key.rsplit_once('.').unwrap_or(("", key));
+        if sec != section {
+            out += &format!("\n[detector.{sec}]\n");
+            section = sec;
+        }
+        let value = match sec {
+            "" => table.get(name),
+            _ => table.get(sec).and_then(|t| t.get(name)),
+        };
+        out += &format!("# {doc}\n");
+        out += &match value {
+            Some(v) => format!("{name} = {v}\n"),
+            None => format!("# {name} =\n"),
+        };
     }
-    let text = toml::to_string(&Wrapper { detector: opts })?;
-    Ok(format!("{header}\n{text}"))
+    Ok(out)
 }
 
 #[cfg(test)]
@@ -105,5 +115,12 @@ mod tests {
         let cfg = Config::parse(&text, "detector.toml").unwrap();
         assert_eq!(cfg.detector, crate::detect::DetectorOptions::default());
         assert!(text.contains("[detector.hough]"), "{text}");
+        // one line of description above each option, every option listed
+        let described = text.lines().filter(|l| l.starts_with("# ")).count();
+        assert!(described > OPTIONS.len(), "{text}");
+        for (key, _) in OPTIONS {
+            let name = key.rsplit('.').next().unwrap();
+            assert!(text.contains(&format!("{name} =")), "{key}: {text}");
+        }
     }
 }

@@ -2,12 +2,11 @@
 //! per image, in input order (a contract other tools rely on).
 
 use crate::camera::{Calibration, FovMask};
-use crate::detect::detector::direction_to_pixel;
 use crate::detect::overlay::draw_overlay;
 use crate::detect::{Detection, Detector, DetectorOptions, Method};
 use crate::frame::{ImageView, PixelFormat};
 use anyhow::Context;
-use clap::{Args, ValueEnum};
+use clap::Args;
 use serde::Serialize;
 use std::collections::HashSet;
 use std::io::Write;
@@ -20,11 +19,11 @@ pub struct DetectArgs {
     /// OCamCalib calib_results.txt or omnirow TOML calibration.
     #[arg(long, value_name = "FILE")]
     pub calib: PathBuf,
-    /// Row-detection method [default: the configuration's, else auto: strips for a
-    /// forward-looking perspective camera, pencil for a narrow lens looking down, combined
-    /// for an omnidirectional lens].
+    /// Row-detection method [default: the configuration's, else auto: combined for an
+    /// omnidirectional lens, strips for a forward-looking perspective camera, hough for a
+    /// narrow lens looking down].
     #[arg(long, value_enum)]
-    pub method: Option<MethodArg>,
+    pub method: Option<Method>,
     /// Take the detector's options from the `[detector]` section of this node
     /// configuration (`omnirow config detector` prints them all), to tune offline.
     #[arg(long, value_name = "FILE")]
@@ -39,29 +38,6 @@ pub struct DetectArgs {
     /// Images (PNG, JPEG, PGM/PPM).
     #[arg(required = true, value_name = "IMAGE")]
     pub images: Vec<PathBuf>,
-}
-
-#[derive(Debug, Clone, Copy, ValueEnum)]
-pub enum MethodArg {
-    Hough,
-    Edge,
-    Combined,
-    Pencil,
-    Strips,
-    Auto,
-}
-
-impl From<MethodArg> for Method {
-    fn from(m: MethodArg) -> Self {
-        match m {
-            MethodArg::Hough => Method::Hough,
-            MethodArg::Edge => Method::Edge,
-            MethodArg::Combined => Method::Combined,
-            MethodArg::Pencil => Method::Pencil,
-            MethodArg::Strips => Method::Strips,
-            MethodArg::Auto => Method::Auto,
-        }
-    }
 }
 
 fn parse_radii(s: &str) -> Result<(f64, f64), String> {
@@ -154,7 +130,7 @@ pub fn run(args: DetectArgs) -> anyhow::Result<ExitCode> {
         None => DetectorOptions::default(),
     };
     if let Some(m) = args.method {
-        opts.method = m.into();
+        opts.method = m;
     }
     let mut detector = Detector::new(&cal, opts)?;
     // the method that runs: `auto` resolved for the calibration
@@ -197,7 +173,7 @@ pub fn run(args: DetectArgs) -> anyhow::Result<ExitCode> {
                     vanishing_point_px: det
                         .vanishing_point
                         .zip(view_cal)
-                        .and_then(|(v, c)| direction_to_pixel(c, &v.direction)),
+                        .and_then(|(v, c)| c.direction_to_pixel(&v.direction)),
                     heading_rad: det.heading_rad,
                     tilt_rad: det.tilt_rad,
                     rows: det

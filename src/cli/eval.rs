@@ -47,8 +47,13 @@ pub struct EvalArgs {
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Methods to score, comma-separated.
-    #[arg(long, value_delimiter = ',', default_value = "edge,hough,combined")]
-    pub methods: Vec<String>,
+    #[arg(
+        long,
+        value_enum,
+        value_delimiter = ',',
+        default_value = "edge,hough,combined"
+    )]
+    pub methods: Vec<Method>,
 }
 
 /// Evaluations other than the paper's synthetic protocol.
@@ -166,23 +171,7 @@ pub fn run(a: EvalArgs) -> anyhow::Result<ExitCode> {
         anyhow::ensure!(s.is_finite() && s > 0.0, "--scale {s} must be positive");
         opts.scale = s;
     }
-    opts.methods = a
-        .methods
-        .iter()
-        .map(|m| match m.trim() {
-            "edge" => Ok(Method::Edge),
-            "hough" => Ok(Method::Hough),
-            "combined" => Ok(Method::Combined),
-            "pencil" => Ok(Method::Pencil),
-            "strips" => Ok(Method::Strips),
-            "auto" => Ok(Method::Auto),
-            other => {
-                anyhow::bail!(
-                    "--methods: unknown method '{other}' (edge, hough, combined, pencil, strips, auto)"
-                )
-            }
-        })
-        .collect::<anyhow::Result<_>>()?;
+    opts.methods = a.methods;
     let tty = std::io::stderr().is_terminal();
     let started = std::time::Instant::now();
     let mut last_pct = usize::MAX;

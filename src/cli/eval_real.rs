@@ -1,9 +1,8 @@
 //! `omnirow eval real`: the detector scored on real images with labelled crop rows
 //! (docs/real.md).
 
-use super::detect::MethodArg;
 use crate::camera::Calibration;
-use crate::detect::DetectorOptions;
+use crate::detect::{DetectorOptions, Method};
 use crate::eval::real::{self, MaskTracing, RealEvalOptions, ScoreOptions};
 use anyhow::Context;
 use clap::Args;
@@ -27,7 +26,7 @@ pub struct RealArgs {
     pub config: Option<PathBuf>,
     /// Row-detection method [default: the configuration's, else the detector's default].
     #[arg(long, value_enum)]
-    pub method: Option<MethodArg>,
+    pub method: Option<Method>,
     /// Folder for README.md (the tables), outcomes.jsonl and overlays/.
     #[arg(long, value_name = "DIR", default_value = "eval-real-out")]
     pub out: PathBuf,
@@ -51,7 +50,7 @@ pub fn run(a: RealArgs) -> anyhow::Result<ExitCode> {
         None => DetectorOptions::default(),
     };
     if let Some(m) = a.method {
-        detector.method = m.into();
+        detector.method = m;
     }
     let opts = RealEvalOptions {
         images: a.images,

@@ -16,7 +16,7 @@
 //! boundaries that pair with nothing are not published. Buffers are reused: a warmed-up
 //! caller allocates nothing.
 
-use super::{Method, Row};
+use super::types::{Detection, Method, Row};
 use nalgebra::Vector3;
 use std::f64::consts::PI;
 
@@ -116,6 +116,31 @@ pub(super) fn strongest_either_side(
 }
 
 impl CentreLines {
+    /// The edge and combined methods' published rows: the edge rows of `out` (boundaries)
+    /// move to `out.boundaries`; those through the vanishing point (within `sin_tol`, the
+    /// sine of the inlier tolerance) become the widths of the Hough rows, or pair into centre
+    /// lines ([`Self::publish`], rows at most `max_half_rad` half-wide), the rest are
+    /// dropped. Without a vanishing point no boundary is published.
+    pub fn publish_detection(
+        &mut self,
+        out: &mut Detection,
+        sin_tol: f64,
+        max_half_rad: f64,
+        rays: &[[f32; 3]],
+        weights: &[f32],
+    ) {
+        out.boundaries.clear();
+        out.boundaries
+            .extend(out.rows.iter().filter(|r| r.method == Method::Edge));
+        let Some(vp) = out.vanishing_point.map(|v| v.direction) else {
+            out.rows.retain(|r| r.method != Method::Edge);
+            return;
+        };
+        out.rows
+            .retain(|r| r.method != Method::Edge || r.normal.dot(&vp).abs() < sin_tol);
+        self.publish(&mut out.rows, &vp, max_half_rad, rays, weights);
+    }
+
     /// Replaces `rows` (through the vanishing point `vp`) by the crop rows' centre lines:
     /// see the module's text. `max_half_rad` bounds a row's half-width; `rays` and
     /// `weights` are the image's vegetation points (used only with edge rows alone).

@@ -14,8 +14,8 @@
 //! where the chords did not (a tilted robot on a straight field also makes the chords'
 //! headings on the nominal ground change with the distance ahead).
 
+use super::types::Row;
 use crate::detect::edge::{merge, Section};
-use crate::detect::Row;
 use nalgebra::{Matrix2, Rotation3, Vector2, Vector3};
 
 /// The bend found in the chords: the rows' heading beside the robot (radians, from the

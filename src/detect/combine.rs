@@ -19,7 +19,7 @@
 //! method: a robust support-weighted fit).
 
 use super::centre::{half_way_limit, strongest_either_side};
-use super::{Method, Row};
+use super::types::{Detection, Method, Row};
 use crate::sphere::Scatter;
 use nalgebra::Vector3;
 
@@ -36,6 +36,77 @@ pub struct PrecisionFit {
     pub sigma_edge: f64,
     /// The same for the centre lines of paired edge boundaries ([`pair_edge_rows`]).
     pub sigma_paired: f64,
+}
+
+/// The widest half-width of a crop row (degrees, around the vanishing point) at the
+/// reference angular resolution: a Hough row and an edge boundary pair when they are at most
+/// this far apart (the half-width of a crop row seen from the camera is a few degrees;
+/// neighbouring rows are farther apart).
+pub const REFERENCE_PAIR_MAX_DEG: f64 = 5.0;
+
+/// The smallest per-method scatter (mrad) the precision fit assumes, so that a few rows
+/// agreeing by chance cannot take all the weight.
+pub const PRECISION_FLOOR_MRAD: f64 = 0.02;
+
+/// The final fit of the edge and combined methods, with its reusable buffers: the vote's
+/// vanishing point refitted over its inlier rows with each method weighted by the
+/// precision its rows show on the image ([`precision_fit`]).
+#[derive(Debug, Clone, Default)]
+pub struct PrecisionRefit {
+    weights: Vec<f64>,
+    scratch: Vec<(f64, f64)>,
+    paired_rows: Vec<Row>,
+    paired_inliers: Vec<bool>,
+    pair_scratch: Vec<(f64, usize, Kind)>,
+}
+
+impl PrecisionRefit {
+    /// Refits `out`'s vanishing point over the rows flagged in `inliers`. With
+    /// `pair_max_rad` (the combined method), the edge boundaries either side of a Hough row
+    /// first pair into its centre line ([`pair_edge_rows`]); `hough_var` holds the Hough
+    /// rows' variances along the vanishing point as the refit estimated them. Keeps the
+    /// vote's fit when the refit cannot be made.
+    pub fn run(
+        &mut self,
+        out: &mut Detection,
+        inliers: &[bool],
+        pair_max_rad: Option<f64>,
+        hough_var: &[f64],
+    ) {
+        let Some(vp) = out.vanishing_point else {
+            return;
+        };
+        let floor = PRECISION_FLOOR_MRAD * 1e-3;
+        let paired = pair_max_rad.is_some_and(|max_half| {
+            pair_edge_rows(
+                &out.rows,
+                inliers,
+                &vp.direction,
+                max_half,
+                &mut self.paired_rows,
+                &mut self.paired_inliers,
+                &mut self.pair_scratch,
+            ) > 0
+        });
+        let (rows, inliers) = if paired {
+            (&self.paired_rows[..], &self.paired_inliers[..])
+        } else {
+            (&out.rows[..], inliers)
+        };
+        let Some(fit) = precision_fit(
+            rows,
+            inliers,
+            &vp.direction,
+            floor,
+            EDGE_PAIR_FACTOR,
+            hough_var,
+            &mut self.weights,
+            &mut self.scratch,
+        ) else {
+            return;
+        };
+        out.set_vanishing_point(fit.direction, vp.inliers, fit.residual_rad);
+    }
 }
 
 /// Cauchy constant, in units of the method's robust scatter. Wider than the textbook 2.385

@@ -15,100 +15,105 @@
 //! of their weighted scatter matrix), iterated with a tolerance that shrinks to three times
 //! the RMS distance of the points; rows that converge onto the same great circle are merged.
 
-use super::{DetectError, Method, Row};
+use super::types::{DetectError, Method, Row};
 use crate::sphere::{axis_angle, canonical, from_phi_theta, Scatter};
 use multiversion::multiversion;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 use std::f32::consts::PI as PI32;
 
-/// Options of the row Hough transform.
+/// `[detector.hough]`: the row Hough transform's options.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct HoughOptions {
-    /// Accumulator cells along φ (0..π). Default (absent): derived from the calibration's
-    /// angular resolution (90, 2° cells, at the GC2450C's; see [`super::scale`]).
-    pub phi_bins: Option<usize>,
-    /// Accumulator cells along θ (0..π; θ + π is the same row). Default: as `phi_bins`.
-    pub theta_bins: Option<usize>,
-    /// At most this many rows are reported (strongest first).
+    /// At most this many rows are reported, strongest first: raise it when the lens sees
+    /// more rows than 12 (a narrow row spacing).
     pub max_rows: usize,
-    /// Peaks with fewer votes, and refined rows with less support, are dropped.
+    /// A row needs this many kept points: lower it for sparse or small plants, raise it
+    /// when weeds make rows.
     pub min_support: u32,
-    /// Peaks below this fraction of the highest peak are dropped.
-    pub min_peak_fraction: f64,
-    /// Half-size (cells) of the non-maximum-suppression window.
-    pub nms_radius: usize,
-    /// Iterations of the refinement fit.
-    pub refine_iterations: usize,
-    /// The refinement never narrows its band below this half-width (degrees). Default: from
-    /// the calibration (0.15° at the GC2450C's resolution).
-    pub min_tolerance_deg: Option<f64>,
-    /// Refined rows closer than this (degrees between normals) are one row. Default: from
-    /// the calibration (1° at the GC2450C's resolution).
-    pub merge_angle_deg: Option<f64>,
-    /// A row whose points do not single out a great circle (ratio of the two smallest
-    /// eigenvalues of their scatter matrix above this) is dropped.
-    pub max_degeneracy: f64,
-    /// At most about this many points vote (an even stride through the kept points; 0: all
-    /// of them); the refinement fits every point. Voting is the transform's cost per point,
-    /// and the peaks need fewer points than the fits do. `min_support` counts in kept
-    /// points: a peak needs `min_support / stride` votes.
-    pub vote_points: usize,
+}
+
+impl HoughOptions {
+    pub fn validate(&self) -> Result<(), DetectError> {
+        if (1..=256).contains(&self.max_rows) {
+            Ok(())
+        } else {
+            Err(DetectError::Options(format!(
+                "hough.max_rows = {} must be 1..=256",
+                self.max_rows
+            )))
+        }
+    }
 }
 
 impl Default for HoughOptions {
     fn default() -> Self {
         HoughOptions {
-            phi_bins: None,
-            theta_bins: None,
             max_rows: 12,
             min_support: 40,
-            min_peak_fraction: 0.1,
-            nms_radius: 2,
-            refine_iterations: 6,
-            min_tolerance_deg: None,
-            merge_angle_deg: None,
-            max_degeneracy: 0.2,
-            vote_points: 3_000,
         }
     }
 }
 
-/// The Hough defaults at the reference angular resolution ([`super::scale`]).
+/// The accumulator's cells along φ and along θ (0..π each) at the reference angular
+/// resolution: 2° cells ([`super::scale`]).
 pub const REFERENCE_BINS: usize = 90;
+/// The refinement never narrows its band below this half-width (degrees) at the reference
+/// angular resolution.
 pub const REFERENCE_MIN_TOLERANCE_DEG: f64 = 0.15;
+/// Refined rows closer than this (degrees between normals) at the reference angular
+/// resolution are one row.
 pub const REFERENCE_MERGE_ANGLE_DEG: f64 = 1.0;
+/// Peaks below this fraction of the highest peak are dropped.
+const MIN_PEAK_FRACTION: f64 = 0.1;
+/// Half-size (cells) of the non-maximum-suppression window.
+const NMS_RADIUS: usize = 2;
+/// Iterations of the refinement fit.
+const REFINE_ITERATIONS: usize = 6;
+/// A row whose points do not single out a great circle (ratio of the two smallest
+/// eigenvalues of their scatter matrix above this) is dropped.
+const MAX_DEGENERACY: f64 = 0.2;
 
-impl HoughOptions {
-    /// Cells along φ in force (the option, else the reference value).
-    pub fn phi_bins(&self) -> usize {
-        self.phi_bins.unwrap_or(REFERENCE_BINS)
-    }
+/// The transform's parameters: the options, and the angular scales the calibration's
+/// field of view sets ([`super::scale`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HoughParams {
+    /// Accumulator cells along φ and along θ (θ + π is the same row).
+    pub bins: usize,
+    /// The refinement's narrowest band (half-width, degrees).
+    pub min_tolerance_deg: f64,
+    /// Refined rows closer than this (degrees between normals) are one row.
+    pub merge_angle_deg: f64,
+    pub max_rows: usize,
+    pub min_support: u32,
+    /// At most about this many points vote (an even stride through the kept points; 0: all
+    /// of them); the refinement fits every point. Voting is the transform's cost per point,
+    /// and the peaks need fewer points than the fits do. `min_support` counts in kept
+    /// points: a peak needs `min_support / stride` votes. 3000.
+    pub vote_points: usize,
+}
 
-    /// Cells along θ in force.
-    pub fn theta_bins(&self) -> usize {
-        self.theta_bins.unwrap_or(REFERENCE_BINS)
-    }
-
-    /// The refinement's narrowest band (degrees) in force.
-    pub fn min_tolerance_deg(&self) -> f64 {
-        self.min_tolerance_deg
-            .unwrap_or(REFERENCE_MIN_TOLERANCE_DEG)
-    }
-
-    /// The merge angle (degrees) in force.
-    pub fn merge_angle_deg(&self) -> f64 {
-        self.merge_angle_deg.unwrap_or(REFERENCE_MERGE_ANGLE_DEG)
+impl HoughParams {
+    /// The parameters of `opts` with the angular scales at `angle_factor` times their
+    /// reference values.
+    pub fn new(opts: &HoughOptions, angle_factor: f64) -> Self {
+        HoughParams {
+            bins: super::scale::scaled_bins(REFERENCE_BINS, angle_factor),
+            min_tolerance_deg: REFERENCE_MIN_TOLERANCE_DEG * angle_factor,
+            merge_angle_deg: REFERENCE_MERGE_ANGLE_DEG * angle_factor,
+            max_rows: opts.max_rows,
+            min_support: opts.min_support,
+            vote_points: 3_000,
+        }
     }
 
     pub fn validate(&self) -> Result<(), DetectError> {
         let bad = |m: String| Err(DetectError::Options(m));
-        if !(4..=2048).contains(&self.phi_bins()) || !(4..=2048).contains(&self.theta_bins()) {
+        if !(4..=2048).contains(&self.bins) {
             return bad(format!(
-                "hough accumulator {}x{} must have 4..=2048 cells on each side",
-                self.phi_bins(),
-                self.theta_bins()
+                "hough accumulator {0}x{0} must have 4..=2048 cells on each side",
+                self.bins
             ));
         }
         if self.max_rows == 0 || self.max_rows > 256 {
@@ -117,37 +122,19 @@ impl HoughOptions {
                 self.max_rows
             ));
         }
-        if self.nms_radius > 64 {
-            return bad(format!(
-                "hough.nms_radius = {} must be within 0..=64",
-                self.nms_radius
-            ));
-        }
-        if !(0.0..=1.0).contains(&self.min_peak_fraction) {
-            return bad(format!(
-                "hough.min_peak_fraction = {} must be within 0..=1",
-                self.min_peak_fraction
-            ));
-        }
-        let t = self.min_tolerance_deg();
+        let t = self.min_tolerance_deg;
         if !(t > 0.0 && t < 10.0) {
             return bad(format!(
-                "hough.min_tolerance_deg = {t} must be within (0, 10)"
-            ));
-        }
-        let m = self.merge_angle_deg();
-        if !(0.0..45.0).contains(&m) {
-            return bad(format!(
-                "hough.merge_angle_deg = {m} must be within [0, 45)"
-            ));
-        }
-        if !(self.max_degeneracy > 0.0 && self.max_degeneracy <= 1.0) {
-            return bad(format!(
-                "hough.max_degeneracy = {} must be within (0, 1]",
-                self.max_degeneracy
+                "the Hough refinement's narrowest band {t}° must be within (0, 10): angle_scale too large"
             ));
         }
         Ok(())
+    }
+}
+
+impl Default for HoughParams {
+    fn default() -> Self {
+        HoughParams::new(&HoughOptions::default(), 1.0)
     }
 }
 
@@ -167,7 +154,7 @@ pub struct HoughResult {
 /// The row Hough transform with its accumulator and scratch buffers (allocated once).
 #[derive(Debug, Clone)]
 pub struct HoughRows {
-    opts: HoughOptions,
+    opts: HoughParams,
     /// cos θ and sin θ at the θ column edges (theta_bins + 1 values).
     cos_e: Vec<f32>,
     sin_e: Vec<f32>,
@@ -274,9 +261,9 @@ fn curve_cells(ray: [f32; 3], cos_e: &[f32], sin_e: &[f32], cell: [f32; 2], edge
 }
 
 impl HoughRows {
-    pub fn new(opts: HoughOptions) -> Result<Self, DetectError> {
+    pub fn new(opts: HoughParams) -> Result<Self, DetectError> {
         opts.validate()?;
-        let t = opts.theta_bins();
+        let t = opts.bins;
         let (cos_e, sin_e) = (0..=t)
             .map(|k| {
                 let th = k as f64 * std::f64::consts::PI / t as f64;
@@ -288,17 +275,17 @@ impl HoughRows {
             cos_e,
             sin_e,
             edge: vec![0; t + 1],
-            acc: vec![0; t * opts.phi_bins()],
-            diff: vec![0; t * (opts.phi_bins() + 1)],
+            acc: vec![0; t * opts.bins],
+            diff: vec![0; t * (opts.bins + 1)],
             vote_stride: 1,
-            peaks: Vec::with_capacity(t * opts.phi_bins()),
+            peaks: Vec::with_capacity(t * opts.bins),
             sel: Vec::new(),
             sel_index: Vec::new(),
             found: Vec::with_capacity(4 * opts.max_rows),
             owned: Vec::new(),
             bands: Vec::with_capacity(opts.max_rows),
             nms: {
-                let r = opts.nms_radius as isize;
+                let r = NMS_RADIUS as isize;
                 let mut v: Vec<(isize, isize)> = (-r..=r)
                     .flat_map(|a| (-r..=r).map(move |b| (a, b)))
                     .filter(|&o| o != (0, 0))
@@ -316,11 +303,11 @@ impl HoughRows {
     /// normals perpendicular to such a vanishing point, and only peaks in that band become
     /// rows. Cells inside the band get the same votes as without a window.
     pub fn set_window(&mut self, window: Option<(&Vector3<f64>, f64)>) {
-        let cell = std::f64::consts::PI / self.opts.phi_bins().min(self.opts.theta_bins()) as f64;
+        let cell = std::f64::consts::PI / self.opts.bins as f64;
         let diag = std::f64::consts::SQRT_2 * cell;
         self.window = window.map(|(vp, w)| Window {
             vp: vp.normalize(),
-            sin_vote: (w + (self.opts.nms_radius as f64 + 1.0) * diag)
+            sin_vote: (w + (NMS_RADIUS as f64 + 1.0) * diag)
                 .min(std::f64::consts::FRAC_PI_2)
                 .sin(),
             sin_peak: (w + diag).min(std::f64::consts::FRAC_PI_2).sin(),
@@ -338,7 +325,7 @@ impl HoughRows {
     fn window_columns(&self, ray: &[f32; 3]) -> Option<(usize, usize)> {
         use std::f64::consts::PI;
         let w = self.window.as_ref()?;
-        let t = self.opts.theta_bins();
+        let t = self.opts.bins;
         let p = Vector3::new(ray[0] as f64, ray[1] as f64, ray[2] as f64).normalize();
         let c = p.cross(&w.vp);
         let s = c.norm();
@@ -370,10 +357,6 @@ impl HoughRows {
         (count < t).then_some(((first + t - 1) % t, count))
     }
 
-    pub fn options(&self) -> &HoughOptions {
-        &self.opts
-    }
-
     /// Half-width (radians) of the band of points each row of the last run was fitted to,
     /// in the order the rows were appended.
     pub fn bands(&self) -> &[f64] {
@@ -387,8 +370,8 @@ impl HoughRows {
 
     /// The normal at the centre of cell (θ column k, φ cell j).
     pub fn cell_normal(&self, k: usize, j: usize) -> Vector3<f64> {
-        let dphi = std::f64::consts::PI / self.opts.phi_bins() as f64;
-        let dth = std::f64::consts::PI / self.opts.theta_bins() as f64;
+        let dphi = std::f64::consts::PI / self.opts.bins as f64;
+        let dth = std::f64::consts::PI / self.opts.bins as f64;
         from_phi_theta((j as f64 + 0.5) * dphi, (k as f64 + 0.5) * dth)
     }
 
@@ -399,8 +382,8 @@ impl HoughRows {
             th -= std::f64::consts::PI;
             phi = std::f64::consts::PI - phi;
         }
-        let p = self.opts.phi_bins();
-        let t = self.opts.theta_bins();
+        let p = self.opts.bins;
+        let t = self.opts.bins;
         let j = ((phi / std::f64::consts::PI * p as f64) as usize).min(p - 1);
         let k = ((th / std::f64::consts::PI * t as f64) as usize).min(t - 1);
         (k, j)
@@ -415,8 +398,8 @@ impl HoughRows {
     /// whole columns).
     #[inline(never)]
     fn vote(&mut self, rays: &[[f32; 3]]) {
-        let p = self.opts.phi_bins();
-        let t = self.opts.theta_bins();
+        let p = self.opts.bins;
+        let t = self.opts.bins;
         let stride = p + 1;
         self.diff.fill(0);
         self.vote_stride = match self.opts.vote_points {
@@ -457,9 +440,9 @@ impl HoughRows {
     /// the curve crosses. `y`, `px`, `py`: the ray with φ(θ) = atan2(y, px cos θ + py sin θ).
     #[inline(always)]
     fn vote_columns(&mut self, y: f32, px: f32, py: f32, from: usize, to: usize) {
-        let scale = self.opts.phi_bins() as f32 / PI32;
-        let pmax = (self.opts.phi_bins() - 1) as f32;
-        let stride = self.opts.phi_bins() + 1;
+        let scale = self.opts.bins as f32 / PI32;
+        let pmax = (self.opts.bins - 1) as f32;
+        let stride = self.opts.bins + 1;
         let edges = &mut self.edge[from..=to];
         curve_cells(
             [y, px, py],
@@ -481,8 +464,8 @@ impl HoughRows {
     /// Neighbour of cell (k, j) at offset (dk, dj) on the wrapped accumulator.
     #[inline]
     fn neighbour(&self, k: usize, j: usize, dk: isize, dj: isize) -> usize {
-        let p = self.opts.phi_bins() as isize;
-        let t = self.opts.theta_bins() as isize;
+        let p = self.opts.bins as isize;
+        let t = self.opts.bins as isize;
         let mut jj = (j as isize + dj).rem_euclid(p);
         let kk = k as isize + dk;
         let kk = if kk < 0 || kk >= t {
@@ -504,7 +487,7 @@ impl HoughRows {
 
     /// The highest cell in the window (the peaks' fraction is of the window's rows).
     fn window_max(&self) -> u32 {
-        let p = self.opts.phi_bins();
+        let p = self.opts.bins;
         let mut max = 0;
         for (idx, &v) in self.acc.iter().enumerate() {
             if v > max && self.in_window(idx / p, idx % p) {
@@ -516,8 +499,8 @@ impl HoughRows {
 
     #[inline(never)]
     fn find_peaks(&mut self) -> u32 {
-        let p = self.opts.phi_bins();
-        let t = self.opts.theta_bins();
+        let p = self.opts.bins;
+        let t = self.opts.bins;
         let max = match self.window {
             None => self.acc.iter().copied().max().unwrap_or(0),
             Some(_) => self.window_max(),
@@ -527,7 +510,7 @@ impl HoughRows {
             .min_support
             .div_ceil(self.vote_stride as u32)
             .max(1))
-        .max((self.opts.min_peak_fraction * max as f64).ceil() as u32);
+        .max((MIN_PEAK_FRACTION * max as f64).ceil() as u32);
         self.peaks.clear();
         for k in 0..t {
             for j in 0..p {
@@ -565,9 +548,9 @@ impl HoughRows {
         rays: &[[f32; 3]],
         weights: &[f32],
     ) -> Option<(Row, f64)> {
-        let cell = std::f64::consts::PI / self.opts.phi_bins().min(self.opts.theta_bins()) as f64;
+        let cell = std::f64::consts::PI / self.opts.bins as f64;
         let mut tol = 1.5 * cell;
-        let min_tol = self.opts.min_tolerance_deg().to_radians();
+        let min_tol = self.opts.min_tolerance_deg.to_radians();
         // Points within twice the first band: later bands are narrower and the normal moves
         // little, so they never need points outside this set.
         let wide = (2.0 * tol).sin() as f32;
@@ -592,7 +575,7 @@ impl HoughRows {
         let mut n = n0;
         let mut support = 0u32;
         let mut fit = None;
-        for _ in 0..self.opts.refine_iterations.max(1) {
+        for _ in 0..REFINE_ITERATIONS {
             let s_tol = tol.sin();
             // The next bands are no wider and the normal moves less than a band: points
             // beyond twice this band are never needed again (the same rule as the first
@@ -624,7 +607,7 @@ impl HoughRows {
             tol = next;
         }
         let f = fit?;
-        if support < self.opts.min_support || f.degeneracy > self.opts.max_degeneracy {
+        if support < self.opts.min_support || f.degeneracy > MAX_DEGENERACY {
             return None;
         }
         Some((
@@ -639,7 +622,7 @@ impl HoughRows {
     }
 
     /// Finds rows among unit rays (camera frame) with per-point weights (used by the
-    /// refinement fit; votes count the voting points, see [`HoughOptions::vote_points`]). Appends the rows to `rows`, strongest first.
+    /// refinement fit; votes count the voting points, see [`HoughParams::vote_points`]). Appends the rows to `rows`, strongest first.
     pub fn find_rows(
         &mut self,
         rays: &[[f32; 3]],
@@ -655,7 +638,7 @@ impl HoughRows {
         }
         self.vote(rays);
         let max_votes = self.find_peaks();
-        let p = self.opts.phi_bins();
+        let p = self.opts.bins;
         self.found.clear();
         let npeaks = self.peaks.len();
         for pi in 0..npeaks {
@@ -670,7 +653,7 @@ impl HoughRows {
         // Accept rows strongest first; a candidate whose points mostly belong to rows already
         // accepted (a great circle through a row's wide near part, or the same row again)
         // is not a row of its own.
-        let merge = self.opts.merge_angle_deg().to_radians();
+        let merge = self.opts.merge_angle_deg.to_radians();
         let start = rows.len();
         self.bands.clear();
         self.owned.clear();
@@ -830,10 +813,9 @@ pub(crate) mod tests {
         let (others, more) = rows_through(other, &[0.7, 1.9], 1500, 0, 8);
         rays.extend(more);
         let weights = vec![1.0f32; rays.len()];
-        let opts = HoughOptions {
+        let opts = HoughParams {
             vote_points: 0,
-            phi_bins: Some(180),
-            theta_bins: Some(180),
+            bins: 180,
             ..Default::default()
         };
         let mut full = HoughRows::new(opts).unwrap();
@@ -845,7 +827,7 @@ pub(crate) mod tests {
         let mut rows = Vec::new();
         narrow.find_rows(&rays, &weights, &mut rows).unwrap();
         // Every cell whose normal is within the window's band sees exactly the full votes.
-        let (p, t) = (opts.phi_bins(), opts.theta_bins());
+        let (p, t) = (opts.bins, opts.bins);
         let mut inside = 0;
         for k in 0..t {
             for j in 0..p {
@@ -892,7 +874,7 @@ pub(crate) mod tests {
             7,
         );
         let weights = vec![1.0f32; rays.len()];
-        let mut h = HoughRows::new(HoughOptions::default()).unwrap();
+        let mut h = HoughRows::new(HoughParams::default()).unwrap();
         let mut rows = Vec::new();
         let res = h.find_rows(&rays, &weights, &mut rows).unwrap();
         assert!(res.rows >= 3, "{res:?} {rows:?}");
@@ -920,7 +902,7 @@ pub(crate) mod tests {
         );
         let weights = vec![1.0f32; rays.len()];
         let run = |vote_points| {
-            let mut h = HoughRows::new(HoughOptions {
+            let mut h = HoughRows::new(HoughParams {
                 vote_points,
                 ..Default::default()
             })
@@ -963,7 +945,7 @@ pub(crate) mod tests {
             let mut rays = Vec::new();
             circle_rays(&n, 2000, 0.0, 2.0, 0.005, &mut rng, &mut rays);
             let weights = vec![1.0f32; rays.len()];
-            let mut h = HoughRows::new(HoughOptions::default()).unwrap();
+            let mut h = HoughRows::new(HoughParams::default()).unwrap();
             let mut rows = Vec::new();
             h.find_rows(&rays, &weights, &mut rows).unwrap();
             assert_eq!(rows.len(), 1, "{n:?}: {rows:?}");
@@ -976,7 +958,7 @@ pub(crate) mod tests {
     fn every_ray_votes_in_the_cell_of_every_circle_through_it() {
         // The rasterised curve of a ray passes through the cell of any normal perpendicular to it.
         let mut rng = Lcg(3);
-        let mut h = HoughRows::new(HoughOptions::default()).unwrap();
+        let mut h = HoughRows::new(HoughParams::default()).unwrap();
         for _ in 0..200 {
             let p = Vector3::new(rng.gauss(), rng.gauss(), rng.gauss()).normalize();
             h.vote(&[[p.x as f32, p.y as f32, p.z as f32]]);
@@ -987,7 +969,7 @@ pub(crate) mod tests {
                 let n = u * t.cos() + v * t.sin();
                 let (k, j) = h.cell_of(&n);
                 // allow the neighbouring φ cell (the curve may turn inside a column)
-                let p_ = h.opts.phi_bins();
+                let p_ = h.opts.bins;
                 let hit = (-1isize..=1).any(|dj| h.acc[h.neighbour(k, j, 0, dj)] > 0)
                     || h.acc[k * p_ + j] > 0;
                 assert!(hit, "ray {p:?} normal {n:?} cell {k},{j}");
@@ -1009,9 +991,9 @@ pub(crate) mod tests {
                 [p.x as f32, p.y as f32, p.z as f32]
             })
             .collect();
-        let mut h = HoughRows::new(HoughOptions::default()).unwrap();
+        let mut h = HoughRows::new(HoughParams::default()).unwrap();
         h.vote(&rays);
-        let (p, t) = (h.opts.phi_bins(), h.opts.theta_bins());
+        let (p, t) = (h.opts.bins, h.opts.bins);
         let mut naive = vec![0u32; p * t];
         let cell = |phi: f32| (phi * p as f32 / PI32).min((p - 1) as f32) as usize;
         for r in &rays {
@@ -1049,23 +1031,23 @@ pub(crate) mod tests {
             })
             .collect();
         let weights = vec![1.0f32; rays.len()];
-        let mut h = HoughRows::new(HoughOptions::default()).unwrap();
+        let mut h = HoughRows::new(HoughParams::default()).unwrap();
         let mut rows = Vec::new();
         h.find_rows(&rays, &weights, &mut rows).unwrap();
         // random rays: any "row" has support near the 3° band's share, far below a real row's
         assert!(rows.iter().all(|r| r.support < 400), "{rows:?}");
         assert!(h.find_rows(&rays, &weights[1..], &mut rows).is_err());
-        assert!(HoughRows::new(HoughOptions {
-            phi_bins: Some(1),
+        assert!(HoughRows::new(HoughParams {
+            bins: 1,
             ..Default::default()
         })
         .is_err());
-        // a hostile suppression radius is refused by name, not a neighbourhood of 10^18 cells
-        let e = HoughRows::new(HoughOptions {
-            nms_radius: 1_000_000_000,
+        // a hostile row count is refused by name
+        let e = HoughRows::new(HoughParams {
+            max_rows: 1_000_000_000,
             ..Default::default()
         })
         .unwrap_err();
-        assert!(e.to_string().contains("hough.nms_radius"), "{e}");
+        assert!(e.to_string().contains("hough.max_rows"), "{e}");
     }
 }

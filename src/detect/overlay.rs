@@ -5,7 +5,7 @@
 //! Owns drawing into a caller-owned RGB8 buffer; used by `omnirow detect --overlay` and by
 //! the node's /overlay.png.
 
-use super::{DetectError, Detection, Method};
+use super::types::{DetectError, Detection, Method};
 use crate::camera::Calibration;
 use crate::frame::{ImageView, PixelFormat};
 use crate::sphere::any_perpendicular;

@@ -18,7 +18,7 @@
 
 use super::comb::{fit_peak_comb_rolled, CombSearch, RolledComb, TanAxis};
 use super::pose::RobotAxes;
-use super::{DetectError, Method, Row};
+use super::types::{DetectError, Method, Row};
 use crate::camera::Mounting;
 use crate::sphere::Scatter;
 use nalgebra::Vector3;

@@ -9,7 +9,7 @@
 //! accepted when it has a vanishing point inside the window; otherwise the detector runs the
 //! full search on the same prepared points, so a wrong prior costs time, never the answer.
 
-use super::DetectError;
+use super::types::DetectError;
 use crate::camera::Mounting;
 use nalgebra::Vector3;
 

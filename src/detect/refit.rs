@@ -10,7 +10,7 @@
 
 use super::hough::fast_atan2;
 use super::sections::{NearField, Sections};
-use super::{DetectError, Row};
+use super::types::{DetectError, Detection, Row};
 use crate::camera::OcamModel;
 use crate::memory::prefetch;
 use crate::sphere::{any_perpendicular, canonical, Fit, Scatter};
@@ -18,121 +18,60 @@ use multiversion::multiversion;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
-/// Options of the precise refit.
+/// `[detector.refit]`: the refit's option.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct RefitOptions {
-    pub enabled: bool,
-    /// Fits per row. The pixels are chosen once per row, so a second fit moves the normal
-    /// only by the few pixels at the band's edge that change sides (no measurable gain on
-    /// Table I); 1 by default.
-    pub iterations: usize,
-    /// Background level = median + this fraction of (threshold level − median); pixels
-    /// below it weigh nothing.
-    pub background_fraction: f64,
-    /// The band is the Hough band widened by this many pixels, to take in the soft edges.
-    pub margin_px: f64,
-    /// Once the vanishing point is known, refit again removing each row's perspective
-    /// bias, and find the vanishing point again.
-    pub perspective: bool,
-    /// Use only the stretches of a row whose whole cross-section (the band on both sides of
-    /// the great circle) lies inside the valid mask. Where a mask edge (the annulus of a
-    /// catadioptric lens, the sky line) crosses a wide row obliquely, the part of the row it
-    /// cuts off on one side would otherwise pull the fitted centre line towards the other.
-    pub full_sections: bool,
-    /// Given a vanishing point, narrow each row's band towards it (see [`refit_rows`]).
-    pub wedge: bool,
-    /// Pixel values are clipped at background + this fraction of (the row's median −
-    /// background), the median taken over the row's pixels above the background (mostly
-    /// the row's solid inside). A wide row's inside then weighs the same everywhere: the
-    /// background noise there (e.g. salt and pepper) no longer moves the centroid, while
-    /// the anti-aliased edges, which carry the sub-pixel position, keep their graded
-    /// values. 0 disables the clipping.
-    pub plateau_cap: f64,
-    /// The Hough method's final vanishing-point fit weighs each inlier row by the inverse of
-    /// the variance the refit estimates for its normal's component along the vanishing
-    /// point (from the background noise on its graded edge pixels, propagated through the
-    /// fit), instead of by its support. A row's precision depends on how far it reaches
-    /// towards the vanishing point and how wide and long its edges are, not on its number
-    /// of thresholded points.
-    pub precision_weights: bool,
-    /// Fit each row's centre line to its cross-sections, weighted by a variance model of
-    /// noise and plant structure estimated per row ([`super::sections`]), instead of to the
-    /// pixels by their mass: leaf clusters whose centre wanders off the stem near the camera,
-    /// where a row is widest, then no longer decide the row.
-    pub sections: bool,
-    /// Cross-sections around the whole great circle (8..=1024).
-    pub section_bins: usize,
-    /// Cross-sections farther than this many of their σ from the line lose weight (Huber);
-    /// 0: none.
-    pub section_huber: f64,
-    /// The plant-structure term of a cross-section's variance grows as its width to this
-    /// power (2: the centre wanders by a share of the width; higher: also the correlation of
-    /// neighbouring sections within one wide plant).
-    pub section_power: f64,
-    /// A curved row is published where it passes beside the robot: the sections within
-    /// this many metres ahead and behind the camera's foot (on the ground, with the
-    /// mounting's height) are fitted with a curvature, and where it is significant the row
-    /// is turned about the vanishing point through its point there, instead of lying on the
-    /// whole row's chord ([`Sections::near_foot`]). Only where the lens sees the row on both
-    /// sides of the foot (omnidirectional lenses). 0: the whole row's fit always.
+    /// A curved row is published where it passes beside the robot: its cross-sections
+    /// within this many metres ahead of and behind the camera's foot are fitted with a
+    /// curvature, and where that is significant the row is turned about the vanishing point
+    /// through its point there ([`Sections::near_foot`]; omnidirectional lenses, which see
+    /// the row on both sides of the foot). About the reach the steering looks ahead; 0
+    /// publishes each row's whole chord.
     pub near_reach_m: f64,
-    /// The curvature counts when it is at least this many of its standard deviations.
-    pub near_min_sigma: f64,
 }
 
 impl Default for RefitOptions {
     fn default() -> Self {
-        RefitOptions {
-            enabled: true,
-            iterations: 1,
-            background_fraction: 0.25,
-            margin_px: 1.5,
-            perspective: false,
-            full_sections: true,
-            wedge: true,
-            plateau_cap: 0.6,
-            precision_weights: true,
-            sections: true,
-            section_bins: 256,
-            section_huber: 1.5,
-            section_power: 4.0,
-            near_reach_m: 2.0,
-            near_min_sigma: 4.0,
-        }
+        RefitOptions { near_reach_m: 2.0 }
     }
 }
 
 impl RefitOptions {
     pub fn validate(&self) -> Result<(), DetectError> {
-        if !(0.0..1.0).contains(&self.background_fraction) {
-            return Err(DetectError::Options(format!(
-                "refit.background_fraction = {} must be within [0, 1)",
-                self.background_fraction
-            )));
+        let r = self.near_reach_m;
+        if r.is_finite() && (0.0..=1000.0).contains(&r) {
+            Ok(())
+        } else {
+            Err(DetectError::Options(format!(
+                "refit.near_reach_m = {r} must be within 0..=1000"
+            )))
         }
-        if self.iterations > MAX_ITERATIONS {
-            return Err(DetectError::Options(format!(
-                "refit.iterations = {} must be within 0..={MAX_ITERATIONS}",
-                self.iterations
-            )));
-        }
-        within("margin_px", self.margin_px, 0.0, 50.0)?;
-        within("plateau_cap", self.plateau_cap, 0.0, 10.0)?;
-        if !(8..=super::sections::MAX_SECTIONS).contains(&self.section_bins) {
-            return Err(DetectError::Options(format!(
-                "refit.section_bins = {} must be within 8..={}",
-                self.section_bins,
-                super::sections::MAX_SECTIONS
-            )));
-        }
-        within("section_huber", self.section_huber, 0.0, 100.0)?;
-        within("section_power", self.section_power, 0.0, 8.0)?;
-        within("near_reach_m", self.near_reach_m, 0.0, 1000.0)?;
-        within("near_min_sigma", self.near_min_sigma, 0.0, 1000.0)?;
-        Ok(())
     }
 }
+
+/// Background level = median + this fraction of (threshold level − median); pixels below
+/// it weigh nothing.
+pub const BACKGROUND_FRACTION: f64 = 0.25;
+/// A row's band is its Hough band widened by this many pixels, to take in the soft edges.
+pub const MARGIN_PX: f64 = 1.5;
+/// Pixel values are clipped at background + this fraction of (the row's median −
+/// background), the median taken over the row's pixels above the background (mostly the
+/// row's solid inside). A wide row's inside then weighs the same everywhere: the background
+/// noise there (e.g. salt and pepper) no longer moves the centroid, while the anti-aliased
+/// edges, which carry the sub-pixel position, keep their graded values.
+pub const PLATEAU_CAP: f64 = 0.6;
+/// Cross-sections around the whole great circle ([`Sections`]).
+const SECTION_BINS: usize = 256;
+/// Cross-sections farther than this many of their σ from the line lose weight (Huber).
+const SECTION_HUBER: f64 = 1.5;
+/// The plant-structure term of a cross-section's variance grows as its width to this power
+/// (2: the centre wanders by a share of the width; higher: also the correlation of
+/// neighbouring sections within one wide plant).
+const SECTION_POWER: f64 = 4.0;
+/// A row's curvature near the robot counts when it is at least this many of its standard
+/// deviations ([`Sections::near_foot`]).
+pub const NEAR_MIN_SIGMA: f64 = 4.0;
 
 /// What the refit measured of its rows, in buffers reused from image to image.
 #[derive(Debug, Clone, Default)]
@@ -159,6 +98,27 @@ pub struct NearFoot {
     pub normal: Vector3<f64>,
     /// Unit ray to the row's centre at the foot.
     pub foot: Vector3<f64>,
+}
+
+/// The curved rows of a refit (those with a foot, [`Sections::near_foot`]) turned about
+/// `out`'s vanishing point through their point beside the robot: there the controller
+/// steers. The vanishing point, found from the rows' whole chords, stays as it is.
+pub fn turn_to_feet(out: &mut Detection, feet: &[NearFoot]) {
+    let Some(vp) = out.vanishing_point.map(|v| v.direction) else {
+        return;
+    };
+    if feet.is_empty() {
+        return;
+    }
+    for r in out.rows.iter_mut() {
+        let turned = feet
+            .iter()
+            .find(|f| f.normal == r.normal)
+            .and_then(|f| f.foot.cross(&vp).try_normalize(1e-9));
+        if let Some(n) = turned {
+            r.normal = canonical(&n);
+        }
+    }
 }
 
 /// The pixels a row's refit reads, reused from row to row: copied side by side as they are
@@ -220,21 +180,6 @@ impl Default for RowFit {
             along_var: f64::NAN,
             foot: None,
         }
-    }
-}
-
-/// The most fits per row a configuration may ask for (a second fit already gains nothing
-/// measurable; a hostile value would keep the detector busy on one image).
-pub const MAX_ITERATIONS: usize = 16;
-
-/// Checks that the refit option `name` is finite and within `lo..=hi`.
-fn within(name: &str, value: f64, lo: f64, hi: f64) -> Result<(), DetectError> {
-    if value.is_finite() && (lo..=hi).contains(&value) {
-        Ok(())
-    } else {
-        Err(DetectError::Options(format!(
-            "refit.{name} = {value} must be within {lo}..={hi}"
-        )))
     }
 }
 
@@ -324,6 +269,9 @@ pub struct RefitImage<'a> {
     pub model: &'a OcamModel,
     /// Pixels at or below this level weigh nothing (the background).
     pub background: u8,
+    /// Values are clipped at the background plus this fraction of a row's median above it
+    /// ([`PLATEAU_CAP`]; 0: not clipped, for rows whose edges are one pixel sharp).
+    pub plateau_cap: f64,
     /// Where the rows' near part is (the ground's normal, the reach in camera heights) for
     /// the near-field fit ([`Sections::near_foot`]); `None`: the whole row's fit always.
     pub near: Option<NearField>,
@@ -395,20 +343,11 @@ impl RefitImage<'_> {
 /// turn it about the vanishing point, which does no harm). The wedge keeps the row's
 /// `bands[i]` at its foot (the point 90° from the vanishing point), narrows in proportion,
 /// and keeps the pixel margin everywhere.
-///
-/// With `perspective` (and `vp`), each fit also removes the perspective bias of a
-/// row that is a strip on the ground: the near half of the strip looks wider than the far
-/// half, so its image is off its centre line by A·cos³ s, with s the angle along the great
-/// circle from the row's foot (the point 90° from the vanishing point) and A unknown per row.
-/// The fit solves for the normal's correction and A together (linear least squares).
-#[allow(clippy::too_many_arguments)]
 pub fn refit_rows(
     img: &RefitImage,
     rows: &mut [Row],
     bands: &[f64],
     vp: Option<&Vector3<f64>>,
-    perspective: bool,
-    opts: &RefitOptions,
     candidates: &mut Candidates,
     fits: &mut RowFits,
 ) -> Result<usize, DetectError> {
@@ -435,15 +374,7 @@ pub fn refit_rows(
     fits.along_var.clear();
     fits.feet.clear();
     for (row, &foot_band) in rows.iter_mut().zip(bands) {
-        let fit = refit_row(
-            img,
-            opts,
-            vp,
-            perspective,
-            foot_band,
-            &row.normal,
-            candidates,
-        );
+        let fit = refit_row(img, vp, foot_band, &row.normal, candidates);
         fits.along_var.push(fit.along_var);
         if let Some(n) = fit.normal {
             row.normal = canonical(&n);
@@ -461,99 +392,62 @@ pub fn refit_rows(
 
 /// One row's fit (`refit_rows`) from the normal `start`: its normal (`None` when no fit
 /// succeeded), the variance along `vp` where estimated, and the near-field foot where the row
-/// bends ([`Sections::near_foot`]).
+/// bends ([`Sections::near_foot`]). The row's cross-sections are fitted
+/// ([`super::sections`]); where they are degenerate, the plain pixel centroid.
 fn refit_row(
     img: &RefitImage,
-    opts: &RefitOptions,
     vp: Option<&Vector3<f64>>,
-    perspective: bool,
     foot_band: f64,
     start: &Vector3<f64>,
     cands: &mut Candidates,
 ) -> RowFit {
-    let margin = opts.margin_px * img.pixel_angle;
-    // The normal moves by a fraction of a pixel between iterations: pixels are collected
-    // once per row within its band widened by this, then each iteration reads only them.
+    let margin = MARGIN_PX * img.pixel_angle;
+    // The band the pixels are collected in is widened by a fraction of a pixel's slack,
+    // which the fit may move the normal by.
     let slack = 2.0 * img.pixel_angle;
-    let wedge = vp.filter(|_| opts.wedge);
-    let mut n = *start;
-    let mut out = RowFit::default();
-    // The angles along the start's circle serve the full sections and the first
-    // cross-section fit (whose frame is the start's).
-    let mut along_valid = opts.sections || opts.full_sections;
-    collect_candidates(
-        img,
-        &n,
-        foot_band + slack,
-        margin + slack,
-        wedge,
-        along_valid,
-        cands,
-    );
-    if opts.full_sections {
-        // Decided once per row: between iterations the circle moves by a fraction of a
-        // pixel, which leaves the stretches where its cross-section is whole unchanged.
-        keep_full_sections(img, &n, foot_band, margin, wedge, cands);
-    }
+    collect_candidates(img, start, foot_band + slack, margin + slack, vp, cands);
+    // Only the stretches of the row whose whole cross-section (the band on both sides of
+    // the great circle) lies inside the valid mask: where a mask edge (the annulus of a
+    // catadioptric lens, the sky line) crosses a wide row obliquely, the part of the row it
+    // cuts off on one side would otherwise pull the fitted centre line towards the other.
+    keep_full_sections(img, start, foot_band, margin, vp, cands);
     let candidates = &*cands;
     let (s_band, s_foot, s_margin) = band_sines(foot_band, margin);
     let band = Band {
         s_band,
         s_foot,
         s_margin,
-        wedge: wedge.map(|v| [v.x as f32, v.y as f32, v.z as f32]),
-        cap: plateau_cap(&candidates.values, img.background, opts.plateau_cap),
+        wedge: vp.map(|v| [v.x as f32, v.y as f32, v.z as f32]),
+        cap: plateau_cap(&candidates.values, img.background, img.plateau_cap),
     };
+    let mut out = RowFit::default();
+    let sec = section_step(img, &band, candidates, &candidates.along, start, vp);
+    if let Some(sf) = sec.fit {
+        out.normal = Some(canonical(&sf.normal));
+        out.foot = img
+            .near
+            .as_ref()
+            .and_then(|nf| sec.sections.near_foot(&sf.normal, nf));
+        if vp.is_some() {
+            out.along_var = sf.along_var;
+        }
+        return out;
+    }
     // Noise only matters for the variance along the vanishing point.
-    let track = vp.is_some();
-    let mut ok = false;
-    for _ in 0..opts.iterations {
-        if let Some(v) = vp.filter(|_| perspective) {
-            match perspective_step(img, &band, candidates, &n, v) {
-                Some(m) => {
-                    n = m;
-                    ok = true;
-                    continue;
-                }
-                None => break,
+    if let Some(PixelFit {
+        fit,
+        scatter,
+        noise,
+    }) = pixel_fit(img, &band, candidates, start, vp.is_some())
+    {
+        if fit.degeneracy < 0.5 {
+            out.normal = Some(fit.normal);
+            if let Some(v) = vp {
+                let lambda = fit.mean_sq_residual * fit.weight;
+                out.along_var = along_variance(&fit.normal, v, &scatter, lambda, &noise);
             }
-        }
-        if opts.sections {
-            let along = along_valid.then_some(&candidates.along[..]);
-            let sec = section_step(img, &band, candidates, along, &n, opts, vp);
-            along_valid = false;
-            if let Some(sf) = sec.fit {
-                n = canonical(&sf.normal);
-                ok = true;
-                out.foot = img
-                    .near
-                    .as_ref()
-                    .and_then(|nf| sec.sections.near_foot(&sf.normal, nf));
-                if track {
-                    out.along_var = sf.along_var;
-                }
-                continue;
-            }
-        }
-        match pixel_fit(img, &band, candidates, &n, track) {
-            Some(PixelFit {
-                fit,
-                scatter,
-                noise,
-            }) if fit.degeneracy < 0.5 => {
-                n = fit.normal;
-                ok = true;
-                // a foot belongs to the normal it was found with
-                out.foot = None;
-                if let Some(v) = vp {
-                    let lambda = fit.mean_sq_residual * fit.weight;
-                    out.along_var = along_variance(&n, v, &scatter, lambda, &noise);
-                }
-            }
-            _ => break,
         }
     }
-    out.normal = ok.then_some(n);
     out
 }
 
@@ -645,34 +539,6 @@ fn to_f32(v: &Vector3<f64>) -> [f32; 3] {
     [v.x as f32, v.y as f32, v.z as f32]
 }
 
-/// One fit of the perspective model: the biased strip's normal equations (features
-/// (e1·p, e2·p, −(e1·p)³), target −n·p) about `n` towards the vanishing point `v`; the new
-/// normal, or `None` when the system is singular or the step implausible.
-fn perspective_step(
-    img: &RefitImage,
-    band: &Band,
-    candidates: &Candidates,
-    n: &Vector3<f64>,
-    v: &Vector3<f64>,
-) -> Option<Vector3<f64>> {
-    let e2 = (v - n * n.dot(v)).normalize();
-    let e1 = n.cross(&e2);
-    let mut ata = nalgebra::Matrix3::<f64>::zeros();
-    let mut atb = Vector3::<f64>::zeros();
-    for InBand { ray, w, .. } in band.pixels(img, candidates, n) {
-        let pv = ray64(ray);
-        let g = e1.dot(&pv);
-        let phi = Vector3::new(g, e2.dot(&pv), -g * g * g);
-        ata += w * phi * phi.transpose();
-        atb += w * phi * -n.dot(&pv);
-    }
-    let x = ata.try_inverse()? * atb;
-    if !x.iter().all(|v| v.is_finite()) || x[0].hypot(x[1]) > 0.1 {
-        return None;
-    }
-    Some((n + e1 * x[0] + e2 * x[1]).normalize())
-}
-
 /// The row's cross-sections about `n` and their fit, started from their mass-weighted fit
 /// (`fit` is `None` when either is degenerate).
 struct SectionStep {
@@ -680,29 +546,24 @@ struct SectionStep {
     fit: Option<super::sections::SectionFit>,
 }
 
+/// The cross-sections of the row about `n` (each candidate at its angle `along` the
+/// circle) and their fit.
 fn section_step(
     img: &RefitImage,
     band: &Band,
     candidates: &Candidates,
-    along: Option<&[f32]>,
+    along: &[f32],
     n: &Vector3<f64>,
-    opts: &RefitOptions,
     vp: Option<&Vector3<f64>>,
 ) -> SectionStep {
-    let mut sections = Sections::new(n, opts.section_bins);
-    let (f1, f2) = sections.frame();
-    let (f1, f2) = (to_f32(&f1), to_f32(&f2));
-    for InBand { k, ray, d, w, .. } in band.pixels(img, candidates, n) {
-        let s = match along {
-            Some(a) => a[k],
-            None => angle_along(&f1, &f2, ray),
-        };
-        sections.add(s, d, w);
+    let mut sections = Sections::new(n, SECTION_BINS);
+    for InBand { k, d, w, .. } in band.pixels(img, candidates, n) {
+        sections.add(along[k], d, w);
     }
     let fit = sections
         .mass_fit()
         .filter(|f| f.degeneracy < 0.5)
-        .and_then(|f| sections.fit(&f.normal, vp, opts.section_huber, opts.section_power));
+        .and_then(|f| sections.fit(&f.normal, vp, SECTION_HUBER, SECTION_POWER));
     SectionStep { sections, fit }
 }
 
@@ -971,7 +832,6 @@ fn collect_candidates(
     foot_band: f64,
     margin: f64,
     vp: Option<&Vector3<f64>>,
-    along: bool,
     cands: &mut Candidates,
 ) {
     cands.clear();
@@ -1026,11 +886,9 @@ fn collect_candidates(
         collect_pixels(&test, img, lo, cols, cands);
     }
     cands.stretches = stretches;
-    if along {
-        cands
-            .along
-            .extend(cands.rays.iter().map(|&p| angle_along(&f1, &f2, p)));
-    }
+    cands
+        .along
+        .extend(cands.rays.iter().map(|&p| angle_along(&f1, &f2, p)));
 }
 
 #[cfg(test)]
@@ -1042,32 +900,12 @@ mod tests {
     use crate::sphere::axis_angle;
 
     #[test]
-    fn too_many_fits_or_a_bad_band_are_named() {
-        for (o, key) in [
-            (
-                RefitOptions {
-                    iterations: MAX_ITERATIONS + 1,
-                    ..RefitOptions::default()
-                },
-                "refit.iterations",
-            ),
-            (
-                RefitOptions {
-                    margin_px: f64::NAN,
-                    ..RefitOptions::default()
-                },
-                "refit.margin_px",
-            ),
-        ] {
-            let e = o.validate().unwrap_err().to_string();
-            assert!(e.contains(key), "{e}");
+    fn a_bad_reach_is_named() {
+        for r in [-1.0, f64::NAN, 1e9] {
+            let e = RefitOptions { near_reach_m: r }.validate().unwrap_err();
+            assert!(e.to_string().contains("refit.near_reach_m"), "{e}");
         }
-        assert!(RefitOptions {
-            iterations: MAX_ITERATIONS,
-            ..RefitOptions::default()
-        }
-        .validate()
-        .is_ok());
+        assert!(RefitOptions::default().validate().is_ok());
     }
 
     #[test]
@@ -1117,6 +955,9 @@ mod tests {
             pixel_angle: 0.0135,
             model: &cal.model,
             background: 10,
+            // The row's edges here are one pixel sharp (no smoothing), where clipping the
+            // plateau would cut into them: the plain intensity centroid.
+            plateau_cap: 0.0,
             near: None,
         };
         // start 5 mrad off
@@ -1128,19 +969,11 @@ mod tests {
             width_rad: 0.0,
         }];
         let mut cand = Candidates::default();
-        // The row's edges here are one pixel sharp (no smoothing), where clipping the
-        // plateau would cut into them: the plain intensity centroid.
-        let centroid = RefitOptions {
-            plateau_cap: 0.0,
-            ..Default::default()
-        };
         let n = refit_rows(
             &img,
             &mut rows,
             &[0.05],
             None,
-            false,
-            &centroid,
             &mut cand,
             &mut RowFits::default(),
         )
@@ -1157,8 +990,6 @@ mod tests {
             &mut rows,
             &[],
             None,
-            false,
-            &RefitOptions::default(),
             &mut cand,
             &mut RowFits::default(),
         )

@@ -4,9 +4,11 @@
 //!
 //! Owns [`angular_resolution`] (pixels per radian at the image centre and the median over the
 //! field of view at the detector's working resolution, and the field of view's extent),
-//! [`resolve`] (every angular option left absent set to its reference value times the
-//! calibration's factor) and [`scales_report`], the lines `omnirow config detector --calib
-//! FILE` prints with the values in force.
+//! [`angle_factor`] (the factor every angular scale's reference value is multiplied by for a
+//! calibration) and [`scaled_bins`]. The stages derive their angular scales from the factor;
+//! [`super::options::resolve`] picks it (the `angle_scale` option, else derived) and
+//! [`super::options::scales_report`] prints the values in force (`omnirow config detector
+//! --calib FILE`).
 //!
 //! The reference values (2° Hough cells, 1° vanishing cells and inlier band, …) were tuned on
 //! the GC2450C's lenses, whose fields of view span 6.56 sr (an extent, the square root, of
@@ -21,15 +23,8 @@
 //! either way) make a finer image of the same lens split its wide rows into narrow cells and
 //! lose them (tests/detect_scale.rs).
 
-use super::hough::{REFERENCE_BINS, REFERENCE_MERGE_ANGLE_DEG, REFERENCE_MIN_TOLERANCE_DEG};
-use super::options::{Binning, DetectorOptions, REFERENCE_PAIR_MAX_DEG};
-use super::vanishing::{
-    REFERENCE_AZIMUTH_BINS, REFERENCE_ELEVATION_BIN_DEG, REFERENCE_INLIER_DEG,
-    REFERENCE_MIN_SPREAD_DEG,
-};
-use super::{DetectError, Method};
+use super::vegetation::Binning;
 use crate::camera::Calibration;
-use std::fmt::Write;
 
 /// The field of view's extent (radians, the square root of its solid angle) at which the
 /// angular options' reference values hold: the GC2450C's ideal fisheye (2.562) and PAL (2.556).
@@ -55,19 +50,14 @@ pub struct AngularResolution {
     pub extent_rad: f64,
 }
 
-/// The angular resolution of `cal` (at its own size, binned as `opts` would bin an RGB or
+/// The angular resolution of `cal` (at its own size, binned as `binning` would bin an RGB or
 /// mono image of that size).
 pub fn angular_resolution(
     cal: &Calibration,
-    opts: &DetectorOptions,
+    binning: Binning,
 ) -> Result<AngularResolution, String> {
     let (h, w) = (cal.model.height, cal.model.width);
-    let even = w % 2 == 0 && h % 2 == 0;
-    let bin = match opts.binning {
-        Binning::Off => false,
-        Binning::Half => true,
-        Binning::Auto => w as u64 * h as u64 > opts.auto_bin_above_px && even,
-    };
+    let bin = binning.bins(w, h);
     let factor = if bin { 2 } else { 1 };
     let work = if bin { cal.rescaled(2.0)? } else { cal.clone() };
     let m = &work.model;
@@ -127,213 +117,10 @@ pub fn angle_factor(a: &AngularResolution) -> f64 {
     2f64.powf(steps / FACTOR_STEPS_PER_OCTAVE).min(1.0)
 }
 
-/// How [`resolve`] derived the options' scales.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Scales {
-    pub resolution: AngularResolution,
-    /// The factor in force (the `angle_scale` option, else [`angle_factor`]).
-    pub factor: f64,
-    /// Whether the factor came from the calibration (no `angle_scale` option).
-    pub derived: bool,
-}
-
-/// Fields of view narrower than this extent (radians, the square root of the solid angle:
-/// about a 115° × 115° perspective view) get the strips method under `method = "auto"`
-/// (the pencil when the mounting does not look forward), wider ones the combined method.
-/// Forward-looking perspective cameras see the rows converge in front of them, where the
-/// strips' peaks lined up through the vanishing point hold on real crop images; the
-/// omnidirectional lenses see them all around and keep the paper's combined method
-/// (docs/real.md).
-pub const NARROW_EXTENT_RAD: f64 = 2.0;
-
-/// The method `auto` stands for on a field of view of `a`'s extent, mounted as `m`.
-pub fn auto_method(a: &AngularResolution, m: &crate::camera::Mounting) -> Method {
-    if a.extent_rad >= NARROW_EXTENT_RAD {
-        Method::Combined
-    } else if super::strips::looks_forward(m) {
-        Method::Strips
-    } else {
-        Method::Pencil
-    }
-}
-
-/// `opts` with every angular option left absent set for `cal`: its reference value times
-/// the factor (`opts.angle_scale`, else derived from the calibration's field of view),
-/// accumulator sizes rounded to whole cells. Options given explicitly are kept.
-pub fn resolve(
-    cal: &Calibration,
-    opts: &DetectorOptions,
-) -> Result<(DetectorOptions, Scales), DetectError> {
-    if let Some(f) = opts.angle_scale {
-        if !(f.is_finite() && (0.01..=100.0).contains(&f)) {
-            return Err(DetectError::Options(format!(
-                "angle_scale = {f} must be within 0.01..=100"
-            )));
-        }
-    }
-    let resolution = angular_resolution(cal, opts).map_err(|e| {
-        DetectError::Calibration(format!("angular resolution at the working size: {e}"))
-    })?;
-    let factor = opts
-        .angle_scale
-        .unwrap_or_else(|| angle_factor(&resolution));
-    let bins = |reference: usize| ((reference as f64 / factor).round() as usize).max(4);
-    let angle = |reference: f64| reference * factor;
-    let mut o = opts.clone();
-    if o.method == Method::Auto {
-        o.method = auto_method(&resolution, &cal.mounting);
-    }
-    if o.method == Method::Strips {
-        let pixels = resolution.width as f64 * resolution.height as f64;
-        let share = ((o.strips.kept_share * pixels).round() as usize).max(1);
-        o.threshold.target_points.get_or_insert(share);
-        o.threshold.min_level.get_or_insert(o.strips.kept_min_level);
-    }
-    let h = &mut o.hough;
-    h.phi_bins.get_or_insert(bins(REFERENCE_BINS));
-    h.theta_bins.get_or_insert(bins(REFERENCE_BINS));
-    h.min_tolerance_deg
-        .get_or_insert(angle(REFERENCE_MIN_TOLERANCE_DEG));
-    h.merge_angle_deg
-        .get_or_insert(angle(REFERENCE_MERGE_ANGLE_DEG));
-    let v = &mut o.vanishing;
-    v.azimuth_bins.get_or_insert(bins(REFERENCE_AZIMUTH_BINS));
-    v.elevation_bin_deg
-        .get_or_insert(angle(REFERENCE_ELEVATION_BIN_DEG));
-    v.inlier_deg.get_or_insert(angle(REFERENCE_INLIER_DEG));
-    v.min_spread_deg
-        .get_or_insert(angle(REFERENCE_MIN_SPREAD_DEG));
-    o.combined
-        .pair_max_deg
-        .get_or_insert(angle(REFERENCE_PAIR_MAX_DEG));
-    o.pencil
-        .polish_max_band_deg
-        .get_or_insert(angle(super::pencil::REFERENCE_POLISH_MAX_BAND_DEG));
-    o.strips
-        .polish_max_band_deg
-        .get_or_insert(angle(super::strips::REFERENCE_POLISH_MAX_BAND_DEG));
-    o.edge
-        .merge
-        .max_angle_rad
-        .get_or_insert(angle(super::edge::merge::REFERENCE_MAX_ANGLE_RAD));
-    Ok((
-        o,
-        Scales {
-            resolution,
-            factor,
-            derived: opts.angle_scale.is_none(),
-        },
-    ))
-}
-
-/// The options' scales for `cal`, as TOML comment lines: the angular resolution, the factor
-/// of the angular options, each angular option in force in degrees and pixels and each pixel
-/// option in degrees, at the median resolution.
-pub fn scales_report(cal: &Calibration, opts: &DetectorOptions) -> Result<String, DetectError> {
-    let auto = opts.method == Method::Auto;
-    let (opts, sc) = resolve(cal, opts)?;
-    let a = sc.resolution;
-    let p = a.median_px_per_rad;
-    let px = |deg: f64| deg.to_radians() * p;
-    let deg = |px: f64| (px / p).to_degrees();
-    let h = &opts.hough;
-    let v = &opts.vanishing;
-    let pe = &opts.pencil;
-    let mut s = String::new();
-    let mut line = |t: String| {
-        let _ = writeln!(s, "# {t}");
-    };
-    line(format!(
-        "working image {}x{} (reduced {}x from the calibration's {}x{})",
-        a.width, a.height, a.factor, cal.model.width, cal.model.height
-    ));
-    line(format!(
-        "angular resolution: {:.1} px/rad at the centre, {:.1} px/rad median over the field of view",
-        a.centre_px_per_rad, p
-    ));
-    line(format!(
-        "field of view: {:.3} sr, an extent of {:.3} rad",
-        a.extent_rad * a.extent_rad,
-        a.extent_rad
-    ));
-    line(format!(
-        "method {}{}",
-        opts.method.name(),
-        if auto {
-            let side = if a.extent_rad < NARROW_EXTENT_RAD {
-                "below"
-            } else {
-                "at least"
-            };
-            format!(
-                " (auto: the field of view's extent {:.3} rad is {side} {NARROW_EXTENT_RAD} rad{})",
-                a.extent_rad,
-                match opts.method {
-                    Method::Strips => ", the camera looks forward",
-                    Method::Pencil => ", the camera does not look forward",
-                    _ => "",
-                }
-            )
-        } else {
-            " (the configuration's)".into()
-        }
-    ));
-    line(format!(
-        "angle_scale {:.4} ({}): angular options absent from the configuration are their \
-         reference value (at an extent of {REFERENCE_EXTENT_RAD} rad) times it",
-        sc.factor,
-        if sc.derived {
-            "derived from the calibration"
-        } else {
-            "the configuration's"
-        }
-    ));
-    line("angular options in force, in pixels at the median resolution:".into());
-    for (name, d) in [
-        ("hough cell along phi", 180.0 / h.phi_bins() as f64),
-        ("hough cell along theta", 180.0 / h.theta_bins() as f64),
-        ("hough.min_tolerance_deg", h.min_tolerance_deg()),
-        ("hough.merge_angle_deg", h.merge_angle_deg()),
-        ("vanishing azimuth cell", 180.0 / v.azimuth_bins() as f64),
-        ("vanishing.elevation_bin_deg", v.elevation_bin_deg()),
-        ("vanishing.inlier_deg", v.inlier_deg()),
-        ("vanishing.min_spread_deg", v.min_spread_deg()),
-        ("combined.pair_max_deg", opts.combined.pair_max_deg()),
-        ("pencil.polish_max_band_deg", pe.polish_max_band_deg()),
-        (
-            "strips.polish_max_band_deg",
-            opts.strips.polish_max_band_deg(),
-        ),
-        (
-            "edge.merge.max_angle_rad",
-            opts.edge.merge.max_angle_rad().to_degrees(),
-        ),
-    ] {
-        line(format!("  {name:<28} {d:>7.3} deg = {:>7.2} px", px(d)));
-    }
-    line("pixel options, in degrees at the median resolution:".into());
-    for (name, l) in [
-        ("smooth.sigma_px", opts.smooth.sigma_px),
-        ("refit.margin_px", opts.refit.margin_px),
-        ("edge.split.tolerance_px", opts.edge.split.tolerance_px),
-        (
-            "edge.merge.max_residual_px",
-            opts.edge.merge.max_residual_px,
-        ),
-        ("pencil.bin_px", pe.bin_px),
-        ("pencil.reference_px", pe.reference_px),
-        ("pencil.search_step_px", pe.search_step_px),
-        ("pencil.min_separation_px", pe.min_separation_px),
-        ("pencil.smooth_px", pe.smooth_px),
-        ("strips.strip_px", opts.strips.strip_px),
-        ("strips.smooth_px", opts.strips.smooth_px),
-        ("strips.peak_sigma_px", opts.strips.peak_sigma_px),
-        ("strips.search_step_px", opts.strips.search_step_px),
-        ("strips.min_depth_px", opts.strips.min_depth_px),
-    ] {
-        line(format!("  {name:<28} {l:>7.2} px = {:>7.3} deg", deg(l)));
-    }
-    Ok(s)
+/// An accumulator's cells for `reference` cells at the reference angular resolution and
+/// angular scales `angle_factor` times their reference values: rounded, at least 4.
+pub fn scaled_bins(reference: usize, angle_factor: f64) -> usize {
+    ((reference as f64 / angle_factor).round() as usize).max(4)
 }
 
 #[cfg(test)]
@@ -343,144 +130,34 @@ mod tests {
 
     #[test]
     fn resolution_scales_with_the_image() {
-        let opts = DetectorOptions::default();
         let big = ideal_fisheye(1200, 1200).unwrap();
         let small = ideal_fisheye(300, 300).unwrap();
         let (a, b) = (
-            angular_resolution(&big, &opts).unwrap(),
-            angular_resolution(&small, &opts).unwrap(),
+            angular_resolution(&big, Binning::Auto).unwrap(),
+            angular_resolution(&small, Binning::Auto).unwrap(),
         );
         assert_eq!((a.factor, b.factor), (1, 1));
         let r = a.median_px_per_rad / b.median_px_per_rad;
         assert!((r - 4.0).abs() < 0.1, "{a:?} {b:?}");
-        let text = scales_report(&big, &opts).unwrap();
-        assert!(text.contains("hough cell along phi"), "{text}");
-        assert!(text.lines().all(|l| l.starts_with('#')), "{text}");
+        // the same lens at two resolutions: the same extent, the same factor
+        assert!((a.extent_rad - b.extent_rad).abs() < 0.01, "{a:?} {b:?}");
+        assert_eq!(angle_factor(&a), angle_factor(&b));
     }
 
     #[test]
     fn binning_halves_the_resolution() {
-        let opts = DetectorOptions::default();
         let cal = ideal_fisheye(2050, 2448).unwrap();
-        let a = angular_resolution(&cal, &opts).unwrap();
+        let a = angular_resolution(&cal, Binning::Auto).unwrap();
         assert_eq!((a.factor, a.width, a.height), (2, 1224, 1025));
-        let off = DetectorOptions {
-            binning: Binning::Off,
-            ..Default::default()
-        };
-        let b = angular_resolution(&cal, &off).unwrap();
+        let b = angular_resolution(&cal, Binning::Off).unwrap();
         let r = b.centre_px_per_rad / a.centre_px_per_rad;
         assert!((r - 2.0).abs() < 0.01, "{a:?} {b:?}");
     }
-    #[test]
-    fn the_gc2450c_keeps_the_reference_values_and_finer_lenses_get_finer_angles() {
-        let defaults = DetectorOptions::default();
-        for cal in [
-            ideal_fisheye(2050, 2448).unwrap(),
-            crate::camera::ideal_pal(2050, 2448).unwrap(),
-        ] {
-            let (o, sc) = resolve(&cal, &defaults).unwrap();
-            assert_eq!(sc.factor, 1.0, "{sc:?}");
-            assert_eq!((o.hough.phi_bins, o.hough.theta_bins), (Some(90), Some(90)));
-            assert_eq!(o.hough.min_tolerance_deg, Some(0.15));
-            assert_eq!(o.vanishing.azimuth_bins, Some(180));
-            assert_eq!(o.vanishing.inlier_deg, Some(1.0));
-            assert_eq!(o.combined.pair_max_deg, Some(5.0));
-        }
-        // The same lens at twice the resolution (unbinned), or at a quarter: the same angles.
-        let fine = DetectorOptions {
-            binning: Binning::Off,
-            ..Default::default()
-        };
-        let (_, sc) = resolve(&ideal_fisheye(2050, 2448).unwrap(), &fine).unwrap();
-        assert_eq!(sc.factor, 1.0, "{sc:?}");
-        let (_, sc) = resolve(&ideal_fisheye(512, 612).unwrap(), &defaults).unwrap();
-        assert_eq!(sc.factor, 1.0, "{sc:?}");
-        // A narrower lens: finer angles, in proportion to its field of view's extent.
-        let narrow = |f: f64| {
-            let text = format!(
-                "[pinhole]\nwidth = 512\nheight = 512\nfx = {f}\nfy = {f}\ncx = 255.5\ncy = 255.5\n"
-            );
-            let cal = Calibration::parse_toml(&text, std::path::Path::new("p.toml")).unwrap();
-            resolve(&cal, &defaults).unwrap()
-        };
-        let ((o3, s3), (o9, s9)) = (narrow(300.0), narrow(900.0));
-        // 1.740 sr and 0.300 sr: extents 1.319 and 0.547 rad
-        assert!((s3.resolution.extent_rad - 1.319).abs() < 0.01, "{s3:?}");
-        assert!((s9.resolution.extent_rad - 0.547).abs() < 0.01, "{s9:?}");
-        let r = s3.factor / s9.factor;
-        assert!((r - 1.319 / 0.547).abs() < 0.25, "{s3:?} {s9:?}");
-        assert_eq!(o3.hough.phi_bins, Some((90.0 / s3.factor).round() as usize));
-        assert_eq!(o9.vanishing.inlier_deg, Some(s9.factor));
-        assert_eq!(o9.edge.merge.max_angle_rad, Some(0.005 * s9.factor));
-    }
 
     #[test]
-    fn the_strips_keep_a_share_of_the_image_above_their_floor_and_other_methods_a_fixed_count() {
-        let text = "[pinhole]\nwidth = 640\nheight = 480\nfx = 300.0\nfy = 300.0\n\
-                    cx = 319.5\ncy = 239.5\n[mounting]\npitch_deg = -47.0\n";
-        let cal = Calibration::parse_toml(text, std::path::Path::new("p.toml")).unwrap();
-        let (o, _) = resolve(&cal, &DetectorOptions::default()).unwrap();
-        assert_eq!(o.method, Method::Strips);
-        let share = o.strips.kept_share;
-        assert_eq!(
-            o.threshold.target_points,
-            Some((share * 640.0 * 480.0).round() as usize)
-        );
-        assert_eq!(o.threshold.min_level, Some(o.strips.kept_min_level));
-        assert_ne!(
-            o.strips.kept_min_level,
-            super::super::threshold::DEFAULT_MIN_LEVEL
-        );
-        // an explicit target, or another method, keeps its own
-        let explicit: DetectorOptions =
-            toml::from_str("[threshold]\ntarget_points = 5000\nmin_level = 12\n").unwrap();
-        let (o, _) = resolve(&cal, &explicit).unwrap();
-        assert_eq!(o.threshold.target_points, Some(5000));
-        assert_eq!(o.threshold.min_level, Some(12));
-        let hough = DetectorOptions {
-            method: Method::Hough,
-            ..Default::default()
-        };
-        let (o, _) = resolve(&cal, &hough).unwrap();
-        assert_eq!(o.threshold.target_points, None);
-        assert_eq!(
-            o.threshold.target_points(),
-            super::super::threshold::DEFAULT_TARGET_POINTS
-        );
-        assert_eq!(
-            o.threshold.min_level(),
-            super::super::threshold::DEFAULT_MIN_LEVEL
-        );
-    }
-
-    #[test]
-    fn explicit_options_override_the_derived_ones() {
-        let cal = ideal_fisheye(2050, 2448).unwrap();
-        let opts: DetectorOptions = toml::from_str(
-            "angle_scale = 0.5\n[hough]\nphi_bins = 60\n[vanishing]\ninlier_deg = 2.0\n",
-        )
-        .unwrap();
-        let (o, _) = resolve(&cal, &opts).unwrap();
-        assert_eq!(o.hough.phi_bins, Some(60));
-        assert_eq!(o.hough.theta_bins, Some(180));
-        assert_eq!(o.vanishing.inlier_deg, Some(2.0));
-        assert_eq!(o.vanishing.min_spread_deg, Some(1.0));
-        let scaled = DetectorOptions {
-            angle_scale: Some(0.25),
-            ..Default::default()
-        };
-        let (o, sc) = resolve(&cal, &scaled).unwrap();
-        assert!(!sc.derived);
-        assert_eq!(o.hough.phi_bins, Some(360));
-        assert_eq!(o.vanishing.min_spread_deg, Some(0.5));
-        for bad in [0.0, -1.0, f64::NAN, 1e3] {
-            let o = DetectorOptions {
-                angle_scale: Some(bad),
-                ..Default::default()
-            };
-            let e = resolve(&cal, &o).unwrap_err().to_string();
-            assert!(e.contains("angle_scale"), "{e}");
-        }
+    fn bins_scale_inversely_with_the_factor_and_never_vanish() {
+        assert_eq!(scaled_bins(90, 1.0), 90);
+        assert_eq!(scaled_bins(90, 0.5), 180);
+        assert_eq!(scaled_bins(90, 100.0), 4);
     }
 }

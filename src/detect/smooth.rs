@@ -5,7 +5,7 @@
 //! intermediate, vertical back to 8 bits. Borders replicate the edge pixel. No allocation
 //! once the caller's buffers have their size.
 
-use super::DetectError;
+use super::types::DetectError;
 use multiversion::multiversion;
 use serde::{Deserialize, Serialize};
 
@@ -31,14 +31,23 @@ pub struct Gaussian {
     radius: usize,
 }
 
+impl SmoothOptions {
+    pub fn validate(&self) -> Result<(), DetectError> {
+        let s = self.sigma_px;
+        if s.is_finite() && (0.0..=20.0).contains(&s) {
+            Ok(())
+        } else {
+            Err(DetectError::Options(format!(
+                "smooth.sigma_px = {s} must be within 0..=20"
+            )))
+        }
+    }
+}
+
 impl Gaussian {
     pub fn new(opts: &SmoothOptions) -> Result<Self, DetectError> {
+        opts.validate()?;
         let s = opts.sigma_px;
-        if !(s.is_finite() && (0.0..=20.0).contains(&s)) {
-            return Err(DetectError::Options(format!(
-                "smooth.sigma_px = {s} must be within 0..=20"
-            )));
-        }
         if s < 0.05 {
             return Ok(Gaussian {
                 kernel: vec![256],

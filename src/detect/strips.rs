@@ -185,6 +185,11 @@ impl Default for StripsOptions {
     }
 }
 
+/// The share of the working image's pixels the threshold keeps for this method.
+pub const KEPT_SHARE: f64 = 0.23;
+/// The threshold's floor for this method.
+pub const KEPT_MIN_LEVEL: u8 = 7;
+
 /// The strips polish's widest band (degrees) at the reference angular resolution: twice the
 /// pencil's, since the strips' rows lie on their own peaks and only need room to reach the
 /// row's centre, and no wider, since a wide band lets the refit pull a row off its own

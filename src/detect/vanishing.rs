@@ -12,98 +12,100 @@
 //! direction are rejected. Fewer than two consistent rows, or rows that all share one
 //! normal, give no vanishing point: the answer is "none", never a guess.
 
-use super::{DetectError, Row, VanishingPoint};
+use super::types::{DetectError, Detection, Row, VanishingPoint};
 use crate::camera::Mounting;
 use crate::sphere::{axis_angle, Scatter};
 use nalgebra::{Rotation3, Vector3};
 use serde::{Deserialize, Serialize};
 
-/// Options of the vanishing-point stage.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+/// `[detector.vanishing]`: the vanishing-point stage's option.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct VanishingOptions {
-    /// Accumulator cells along the azimuth (0..180°). Default (absent): derived from the
-    /// calibration's field of view (180, 1° cells, at the GC2450C's; [`super::scale`]).
-    pub azimuth_bins: Option<usize>,
-    /// Accumulator cell height along the elevation (degrees). Default: from the calibration
-    /// (1° at the GC2450C's resolution).
-    pub elevation_bin_deg: Option<f64>,
     /// A row is consistent with the vanishing point when its normal is within this angle
-    /// (degrees) of the plane perpendicular to the direction. Default: from the calibration
-    /// (1° at the GC2450C's resolution).
+    /// (degrees) of the plane perpendicular to the direction: raise it for rows that bend
+    /// or a wandering drill, lower it when weeds line up. Absent: derived from the
+    /// calibration (1° at the GC2450C's field of view; [`super::scale`]).
     pub inlier_deg: Option<f64>,
-    /// Rows whose normals are all within this angle (degrees) of each other do not define
-    /// a direction. Default: from the calibration (2° at the GC2450C's resolution).
-    pub min_spread_deg: Option<f64>,
-    /// Iterations of the fit / inlier update.
-    pub refine_iterations: usize,
 }
 
-/// The vanishing stage's defaults at the reference angular resolution ([`super::scale`]).
+/// The stage's angular scales at the reference angular resolution ([`super::scale`]):
+/// accumulator cells along the azimuth (0..180°), the cells' height along the elevation
+/// (degrees), the inlier tolerance (degrees), and the smallest spread of the rows' normals
+/// (degrees) that defines a direction.
 pub const REFERENCE_AZIMUTH_BINS: usize = 180;
 pub const REFERENCE_ELEVATION_BIN_DEG: f64 = 1.0;
 pub const REFERENCE_INLIER_DEG: f64 = 1.0;
 pub const REFERENCE_MIN_SPREAD_DEG: f64 = 2.0;
-
-impl Default for VanishingOptions {
-    fn default() -> Self {
-        VanishingOptions {
-            azimuth_bins: None,
-            elevation_bin_deg: None,
-            inlier_deg: None,
-            min_spread_deg: None,
-            refine_iterations: 10,
-        }
-    }
-}
+/// Iterations of the fit / inlier update.
+pub const REFINE_ITERATIONS: usize = 10;
 
 impl VanishingOptions {
-    /// Azimuth cells in force (the option, else the reference value).
-    pub fn azimuth_bins(&self) -> usize {
-        self.azimuth_bins.unwrap_or(REFERENCE_AZIMUTH_BINS)
-    }
-
-    /// Elevation cell (degrees) in force.
-    pub fn elevation_bin_deg(&self) -> f64 {
-        self.elevation_bin_deg
-            .unwrap_or(REFERENCE_ELEVATION_BIN_DEG)
-    }
-
-    /// Inlier tolerance (degrees) in force.
+    /// Inlier tolerance (degrees) in force (the option, else the reference value).
     pub fn inlier_deg(&self) -> f64 {
         self.inlier_deg.unwrap_or(REFERENCE_INLIER_DEG)
     }
 
-    /// Smallest spread of the rows' normals (degrees) in force.
-    pub fn min_spread_deg(&self) -> f64 {
-        self.min_spread_deg.unwrap_or(REFERENCE_MIN_SPREAD_DEG)
+    pub fn validate(&self) -> Result<(), DetectError> {
+        match self.inlier_deg {
+            Some(i) if !(i > 0.0 && i < 30.0) => Err(DetectError::Options(format!(
+                "vanishing.inlier_deg = {i} must be within (0, 30)"
+            ))),
+            _ => Ok(()),
+        }
+    }
+}
+
+/// The stage's parameters: the inlier tolerance and the angular scales the calibration's
+/// field of view sets ([`super::scale`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct VanishingParams {
+    /// Accumulator cells along the azimuth (0..180°).
+    pub azimuth_bins: usize,
+    /// Accumulator cell height along the elevation (degrees).
+    pub elevation_bin_deg: f64,
+    /// See [`VanishingOptions::inlier_deg`].
+    pub inlier_deg: f64,
+    /// Rows whose normals are all within this angle (degrees) of each other do not define
+    /// a direction.
+    pub min_spread_deg: f64,
+}
+
+impl VanishingParams {
+    /// The parameters of `opts` with the angular scales at `angle_factor` times their
+    /// reference values (and the inlier tolerance too, when the option is absent).
+    pub fn new(opts: &VanishingOptions, angle_factor: f64) -> Self {
+        VanishingParams {
+            azimuth_bins: super::scale::scaled_bins(REFERENCE_AZIMUTH_BINS, angle_factor),
+            elevation_bin_deg: REFERENCE_ELEVATION_BIN_DEG * angle_factor,
+            inlier_deg: opts
+                .inlier_deg
+                .unwrap_or(REFERENCE_INLIER_DEG * angle_factor),
+            min_spread_deg: REFERENCE_MIN_SPREAD_DEG * angle_factor,
+        }
     }
 
     pub fn validate(&self) -> Result<(), DetectError> {
         let bad = |m: String| Err(DetectError::Options(m));
-        let a = self.azimuth_bins();
-        if !(4..=4096).contains(&a) {
+        let a = self.azimuth_bins;
+        let e = self.elevation_bin_deg;
+        if !((4..=4096).contains(&a) && e > 0.01 && e <= 10.0) {
             return bad(format!(
-                "vanishing.azimuth_bins = {a} must be within 4..=4096"
+                "the vanishing accumulator's cells ({a} along the azimuth, {e}° high) must \
+                 be 4..=4096 and (0.01, 10]: angle_scale out of range"
             ));
         }
-        let e = self.elevation_bin_deg();
-        if !(e > 0.01 && e <= 10.0) {
-            return bad(format!(
-                "vanishing.elevation_bin_deg = {e} must be within (0.01, 10]"
-            ));
-        }
-        let i = self.inlier_deg();
+        let i = self.inlier_deg;
         if !(i > 0.0 && i < 30.0) {
             return bad(format!("vanishing.inlier_deg = {i} must be within (0, 30)"));
         }
-        let m = self.min_spread_deg();
-        if !(0.0..90.0).contains(&m) {
-            return bad(format!(
-                "vanishing.min_spread_deg = {m} must be within [0, 90)"
-            ));
-        }
         Ok(())
+    }
+}
+
+impl Default for VanishingParams {
+    fn default() -> Self {
+        VanishingParams::new(&VanishingOptions::default(), 1.0)
     }
 }
 
@@ -123,7 +125,7 @@ pub struct VanishingResult {
 /// The second Hough transform and its fit (buffers allocated once).
 #[derive(Debug, Clone)]
 pub struct VanishingFinder {
-    opts: VanishingOptions,
+    opts: VanishingParams,
     max_tilt: f64,
     robot_from_camera: Rotation3<f64>,
     cos_e: Vec<f64>,
@@ -144,7 +146,7 @@ impl VanishingFinder {
     /// `max_tilt_deg`: the vanishing point is searched within ± this angle of the robot's
     /// horizontal plane.
     pub fn new(
-        opts: VanishingOptions,
+        opts: VanishingParams,
         max_tilt_deg: f64,
         mounting: &Mounting,
     ) -> Result<Self, DetectError> {
@@ -154,12 +156,12 @@ impl VanishingFinder {
                 "max_tilt_deg = {max_tilt_deg} must be within (0, 80]"
             )));
         }
-        let a = opts.azimuth_bins();
+        let a = opts.azimuth_bins;
         let (cos_e, sin_e) = (0..=a)
             .map(|k| (k as f64 * std::f64::consts::PI / a as f64).sin_cos())
             .map(|(s, c)| (c, s))
             .unzip();
-        let elev_bins = (2.0 * max_tilt_deg / opts.elevation_bin_deg()).ceil() as usize;
+        let elev_bins = (2.0 * max_tilt_deg / opts.elevation_bin_deg).ceil() as usize;
         let tilt = max_tilt_deg.to_radians();
         let tan_edges = (0..=elev_bins)
             .map(|m| (-tilt + m as f64 * 2.0 * tilt / elev_bins as f64).tan())
@@ -182,7 +184,7 @@ impl VanishingFinder {
     /// sign free), or anywhere (`None`). The fit that follows may still move the direction
     /// out of the window; the caller checks it.
     pub fn set_window(&mut self, window: Option<(&Vector3<f64>, f64)>) {
-        let cell = (std::f64::consts::PI / self.opts.azimuth_bins() as f64)
+        let cell = (std::f64::consts::PI / self.opts.azimuth_bins as f64)
             .max(2.0 * self.max_tilt / self.elev_bins as f64);
         self.window = window.map(|(vp, w)| {
             (
@@ -192,10 +194,6 @@ impl VanishingFinder {
                     .cos(),
             )
         });
-    }
-
-    pub fn options(&self) -> &VanishingOptions {
-        &self.opts
     }
 
     /// Finds the vanishing point of `rows`, each weighted by `weights[i]` (e.g. its support).
@@ -237,11 +235,11 @@ impl VanishingFinder {
             return Ok(none);
         };
         let mut v = self.robot_from_camera.inverse() * v0;
-        let s_tol = self.opts.inlier_deg().to_radians().sin();
+        let s_tol = self.opts.inlier_deg.to_radians().sin();
         let mut residual = 0.0;
         let mut inlier_weight = 0.0;
         let mut count = 0usize;
-        for _ in 0..self.opts.refine_iterations.max(1) {
+        for _ in 0..REFINE_ITERATIONS {
             let mut sc = Scatter::new();
             let mut changed = false;
             for (i, r) in rows.iter().enumerate() {
@@ -284,7 +282,7 @@ impl VanishingFinder {
                 }
             }
         }
-        if spread < self.opts.min_spread_deg().to_radians() {
+        if spread < self.opts.min_spread_deg.to_radians() {
             inliers.fill(false);
             return Ok(none);
         }
@@ -293,7 +291,7 @@ impl VanishingFinder {
             v = -v;
         }
         let quality = (inlier_weight / total_weight).clamp(0.0, 1.0)
-            * (1.0 - residual / self.opts.inlier_deg().to_radians()).clamp(0.0, 1.0)
+            * (1.0 - residual / self.opts.inlier_deg.to_radians()).clamp(0.0, 1.0)
             * (1.0 - 0.5f64.powi(count_final as i32 - 1));
         Ok(VanishingResult {
             vanishing_point: Some(VanishingPoint {
@@ -311,7 +309,7 @@ impl VanishingFinder {
     /// two neighbouring azimuths its elevation spans a range of bins. The elevation's tangent
     /// (t / n.z) is placed among the bins' edges' tangents, which orders it as its angle.
     fn vote(&mut self, weights: &[f64]) {
-        let a = self.opts.azimuth_bins();
+        let a = self.opts.azimuth_bins;
         let e = self.elev_bins;
         self.acc.fill(0.0);
         let edges = &self.tan_edges;
@@ -377,13 +375,116 @@ impl VanishingFinder {
         let e = self.elev_bins;
         let tilt = self.max_tilt;
         let (k, j) = (idx / e, idx % e);
-        let alpha = (k as f64 + 0.5) * std::f64::consts::PI / self.opts.azimuth_bins() as f64;
+        let alpha = (k as f64 + 0.5) * std::f64::consts::PI / self.opts.azimuth_bins as f64;
         let beta = -tilt + (j as f64 + 0.5) * 2.0 * tilt / e as f64;
         Vector3::new(
             beta.cos() * alpha.cos(),
             beta.cos() * alpha.sin(),
             beta.sin(),
         )
+    }
+}
+
+/// The vanishing-point stage a method calls: the finder with its scratch, over a
+/// detection's rows.
+#[derive(Debug, Clone)]
+pub struct VanishingStage {
+    finder: VanishingFinder,
+    weights: Vec<f64>,
+    inliers: Vec<bool>,
+}
+
+impl VanishingStage {
+    /// `max_tilt_deg`: the vanishing point is searched within ± this angle of the robot's
+    /// horizontal plane.
+    pub fn new(
+        params: VanishingParams,
+        max_tilt_deg: f64,
+        mounting: &Mounting,
+    ) -> Result<Self, DetectError> {
+        Ok(VanishingStage {
+            finder: VanishingFinder::new(params, max_tilt_deg, mounting)?,
+            weights: Vec::with_capacity(64),
+            inliers: Vec::with_capacity(64),
+        })
+    }
+
+    /// The stage's parameters.
+    pub fn params(&self) -> &VanishingParams {
+        &self.finder.opts
+    }
+
+    /// Finds the vanishing point of `out.rows` (weighted by `weights`, or by each row's
+    /// support when `None`) and sets `out`'s vanishing point and quality.
+    pub fn run(
+        &mut self,
+        weights: Option<&[f64]>,
+        out: &mut Detection,
+    ) -> Result<VanishingResult, DetectError> {
+        let w: &[f64] = match weights {
+            Some(w) => w,
+            None => {
+                support_weights(&out.rows, &mut self.weights);
+                &self.weights
+            }
+        };
+        let r = self.finder.find(&out.rows, w, &mut self.inliers)?;
+        out.vanishing_point = r.vanishing_point;
+        out.quality = r.quality;
+        Ok(r)
+    }
+
+    /// The finder on other rows or weights, with its own inlier flags (a method's
+    /// candidates), leaving the last run's inliers as they are.
+    pub fn find(
+        &mut self,
+        rows: &[Row],
+        weights: &[f64],
+        inliers: &mut Vec<bool>,
+    ) -> Result<VanishingResult, DetectError> {
+        self.finder.find(rows, weights, inliers)
+    }
+
+    /// Per row of the last run: whether it agrees with the vanishing point.
+    pub fn inliers(&self) -> &[bool] {
+        &self.inliers
+    }
+
+    /// Narrows the finder's search to a window, or widens it again (`None`).
+    pub fn set_window(&mut self, window: Option<(&Vector3<f64>, f64)>) {
+        self.finder.set_window(window);
+    }
+
+    /// The last run's vanishing point refitted over its inlier rows, each weighted by the
+    /// inverse of `variances[i]`, its normal's variance along the vanishing point as the
+    /// refit estimated it ([`super::refit::RowFits::along_var`]): a row's precision
+    /// depends on how far it reaches towards the vanishing point and how wide and long its
+    /// edges are, not on its number of points. Keeps the vote's fit when any inlier lacks
+    /// an estimate.
+    pub fn refit_by_variances(&mut self, out: &mut Detection, variances: &[f64]) {
+        let Some(vp) = out.vanishing_point else {
+            return;
+        };
+        let inliers = &self.inliers;
+        if variances.len() != out.rows.len() || inliers.len() != out.rows.len() {
+            return;
+        }
+        self.weights.clear();
+        for (&v, &ok) in variances.iter().zip(inliers) {
+            if !ok {
+                self.weights.push(0.0);
+            } else if v.is_finite() && v > 0.0 {
+                self.weights.push(1.0 / v);
+            } else {
+                return;
+            }
+        }
+        let Some((direction, residual_rad)) =
+            refit_direction(&out.rows, inliers, &self.weights, &vp.direction)
+        else {
+            return;
+        };
+        out.set_vanishing_point(direction, vp.inliers, residual_rad);
     }
 }
 
@@ -429,7 +530,7 @@ mod tests {
 
     /// The vote as it was written first: each great circle's elevation by its arc tangent.
     fn vote_by_angles(f: &VanishingFinder, weights: &[f64]) -> Vec<f64> {
-        let (a, e, tilt) = (f.opts.azimuth_bins(), f.elev_bins, f.max_tilt);
+        let (a, e, tilt) = (f.opts.azimuth_bins, f.elev_bins, f.max_tilt);
         let scale = e as f64 / (2.0 * tilt);
         let mut acc = vec![0.0; a * e];
         for (n, &w) in f.robot_normals.iter().zip(weights) {
@@ -467,8 +568,8 @@ mod tests {
             (state >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
         };
         for (tilt, opts) in [
-            (15.0, VanishingOptions::default()),
-            (40.0, VanishingOptions::default()),
+            (15.0, VanishingParams::default()),
+            (40.0, VanishingParams::default()),
         ] {
             let mut f = VanishingFinder::new(opts, tilt, &Mounting::default()).unwrap();
             f.robot_normals.clear();
@@ -520,7 +621,7 @@ mod tests {
             width_rad: 0.0,
         });
         let mut f =
-            VanishingFinder::new(VanishingOptions::default(), 15.0, &Mounting::default()).unwrap();
+            VanishingFinder::new(VanishingParams::default(), 15.0, &Mounting::default()).unwrap();
         let mut w = Vec::new();
         support_weights(&rows, &mut w);
         let mut inl = Vec::new();
@@ -540,7 +641,7 @@ mod tests {
         let vp = dir(-1.0, -0.1);
         let rows = rows_through(&vp, &[0.4, 1.9], 100);
         let mut f =
-            VanishingFinder::new(VanishingOptions::default(), 15.0, &Mounting::default()).unwrap();
+            VanishingFinder::new(VanishingParams::default(), 15.0, &Mounting::default()).unwrap();
         let mut inl = Vec::new();
         let r = f.find(&rows, &[100.0, 100.0], &mut inl).unwrap();
         assert!(axis_angle(&r.vanishing_point.unwrap().direction, &vp) < 1e-9);
@@ -598,7 +699,7 @@ mod tests {
             })
             .collect();
         let mut f =
-            VanishingFinder::new(VanishingOptions::default(), 15.0, &Mounting::default()).unwrap();
+            VanishingFinder::new(VanishingParams::default(), 15.0, &Mounting::default()).unwrap();
         let mut inl = Vec::new();
         let r = f.find(&rows, &[1.0; 10], &mut inl).unwrap();
         let v = r.vanishing_point.unwrap();

@@ -9,10 +9,36 @@
 //! (r, c) is centred at full-resolution (2r + 0.5, 2c + 0.5), which
 //! [`Calibration::rescaled`](crate::camera::Calibration::rescaled) does).
 
-use super::{DetectError, GreyImage};
+use super::types::{DetectError, GreyImage};
 use crate::frame::{ImageView, PixelFormat};
 use multiversion::multiversion;
 use serde::{Deserialize, Serialize};
+
+/// Whether full-resolution Mono8/RGB8 input is binned 2×2 before detection.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Binning {
+    /// Bin when the image has more than [`AUTO_BIN_ABOVE_PX`] pixels (and even sides).
+    #[default]
+    Auto,
+    Off,
+    Half,
+}
+
+/// `binning = "auto"` bins images of more than this many pixels (a GC2450C frame).
+pub const AUTO_BIN_ABOVE_PX: u64 = 1_600_000;
+
+impl Binning {
+    /// Whether an image of `width`×`height` pixels is binned 2×2.
+    pub fn bins(self, width: u32, height: u32) -> bool {
+        let even = width % 2 == 0 && height % 2 == 0;
+        match self {
+            Binning::Off => false,
+            Binning::Half => true,
+            Binning::Auto => width as u64 * height as u64 > AUTO_BIN_ABOVE_PX && even,
+        }
+    }
+}
 
 /// Which index turns colour into vegetation.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]

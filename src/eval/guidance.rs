@@ -371,7 +371,11 @@ pub fn write(
                 Series {
                     label: "truth".into(),
                     colour: [40, 40, 40],
-                    points: d.series.iter().map(|p| (p.time_s, p.truth_offset_m)).collect(),
+                    points: d
+                        .series
+                        .iter()
+                        .map(|p| (p.time_s, p.truth_offset_m))
+                        .collect(),
                     kind: Kind::Line,
                 },
                 Series {
@@ -415,10 +419,12 @@ mod tests {
         let dir =
             std::env::temp_dir().join(format!("omnirow-eval-guidance-{}", std::process::id()));
         let files = write(&[d], &dir, "test").unwrap();
-        assert_eq!(files.len(), 2);
+        assert_eq!(files.len(), 3);
         let md = std::fs::read_to_string(&files[0]).unwrap();
         assert!(md.contains("| weaving | 8 | 8 |"), "{md}");
-        assert!(image::open(&files[1]).is_ok());
+        let frames = std::fs::read_to_string(&files[1]).unwrap();
+        assert_eq!(frames.lines().count(), 8, "{frames}");
+        assert!(image::open(&files[2]).is_ok());
         std::fs::remove_dir_all(&dir).ok();
     }
 }

@@ -3,8 +3,8 @@
 
 use super::stats::{quantile, Summary};
 use crate::camera::{Calibration, IdealLens};
-use crate::detect::detector::{Detector, DetectorOptions};
 use crate::detect::{DetectError, Detection, Method};
+use crate::detect::{Detector, DetectorOptions};
 use crate::frame::ImageView;
 use crate::sphere::axis_angle;
 use crate::synth::{

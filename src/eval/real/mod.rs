@@ -17,6 +17,7 @@ pub use report::{markdown, write, Summary};
 pub use score::{ImageScore, LabelFit, ProjectedRow, ScoreOptions};
 
 use crate::camera::Calibration;
+use crate::detect::method::strips::StripsMethod;
 use crate::detect::{DetectError, Detection, Detector, DetectorOptions, Method};
 use crate::estimate::Estimate;
 use crate::frame::{Frame, ImageView, PixelFormat};
@@ -99,7 +100,7 @@ pub struct RealOutcome {
 
 /// The strips' agreement (the measure their search maximises) at the search's answer and at
 /// the summit nearest the labels' vanishing point
-/// ([`crate::detect::strips::StripsRows::agreement_near`]), and how far that summit lies
+/// ([`StripsMethod::agreement_near`]), and how far that summit lies
 /// from the search's answer (pixels of the strips' virtual image). Where the vanishing point
 /// is far off, a higher summit elsewhere says the search missed it; a lower one, or the
 /// search's own (the climb from the labels' point may end there), that the measure itself
@@ -266,9 +267,10 @@ pub fn run(
 /// The strips' agreement at their answer and near the labels' vanishing direction, when the
 /// strips method found a vanishing point on the last image.
 fn vp_agreement(detector: &mut Detector, labels_vp: Option<&Vector3<f64>>) -> Option<VpAgreement> {
-    let search = detector.last_strips()?;
+    let strips = detector.method_as_mut::<StripsMethod>()?;
+    let search = strips.last();
     search.vanishing_px?;
-    let (labels, away) = detector.strips_agreement_near(labels_vp?)?;
+    let (labels, away) = strips.agreement_near(labels_vp?)?;
     Some(VpAgreement {
         search: search.agreement,
         labels,

@@ -416,7 +416,7 @@ pub fn labels_vanishing_point(
 /// the sign whose pixel is in the field of view, else any the model can project (a vanishing
 /// point outside the image still has a pixel position).
 pub fn vanishing_pixel(cal: &Calibration, dir: &Vector3<f64>) -> Option<[f64; 2]> {
-    crate::detect::detector::direction_to_pixel(cal, dir)
+    cal.direction_to_pixel(dir)
         .or_else(|| [*dir, -*dir].iter().find_map(|d| cal.model.world2cam(d)))
 }
 

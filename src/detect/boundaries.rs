@@ -1,0 +1,91 @@
+//! The plants' boundary lines of a frame: the edge detector ([`super::edge`], paper II-C)
+//! run on the preparation's smoothed vegetation image and mask.
+//!
+//! Owns [`Boundaries`]: the edge detector, set up for the working image (again whenever the
+//! preparation's setup is rebuilt), and its rows, the boundary lines, of the last frame. The
+//! stage the edge and the combined methods share.
+
+use super::edge::{EdgeDetector, EdgeError, EdgeOptions, EdgeResult};
+use super::prepare::Preparer;
+use super::types::{DetectError, Row};
+
+impl From<EdgeError> for DetectError {
+    fn from(e: EdgeError) -> Self {
+        match e {
+            EdgeError::Options(m) => DetectError::Options(format!("edge.{m}")),
+            EdgeError::Calibration(m) => DetectError::Calibration(m),
+            other => DetectError::Buffer(other.to_string()),
+        }
+    }
+}
+
+/// The edge detector of the frames and its last rows.
+#[derive(Debug, Clone)]
+pub struct Boundaries {
+    params: EdgeOptions,
+    detector: Option<EdgeDetector>,
+    /// The boundary lines of the last frame.
+    pub rows: Vec<Row>,
+    last: EdgeResult,
+}
+
+impl Boundaries {
+    /// The stage for the `[detector.edge]` options, its angular scales at `angle_factor`
+    /// times their reference values.
+    pub fn new(opts: &EdgeOptions, angle_factor: f64) -> Result<Self, DetectError> {
+        let mut params = *opts;
+        params
+            .merge
+            .max_angle_rad
+            .get_or_insert(super::edge::merge::REFERENCE_MAX_ANGLE_RAD * angle_factor);
+        params.validate()?;
+        Ok(Boundaries {
+            params,
+            detector: None,
+            rows: Vec::with_capacity(64),
+            last: EdgeResult::default(),
+        })
+    }
+
+    /// Finds the boundary lines on the preparation's last image (`rebuilt`: its setup was
+    /// rebuilt for it).
+    pub fn run(&mut self, prep: &Preparer, rebuilt: bool) -> Result<(), DetectError> {
+        self.rows.clear();
+        self.last = EdgeResult::default();
+        let (_, smoothed) = prep.vegetation();
+        let (w, h) = (smoothed.width, smoothed.height);
+        let (Some(cal), Some((mask, _))) = (prep.working_calibration(), prep.mask()) else {
+            return Err(DetectError::Buffer(
+                "edge method: the preparer has no setup".into(),
+            ));
+        };
+        let stale = match &self.detector {
+            None => true,
+            Some(e) => rebuilt || e.size() != (w, h),
+        };
+        if stale {
+            self.detector = Some(EdgeDetector::new(cal, w, h, self.params)?);
+        }
+        let Some(edge) = self.detector.as_mut() else {
+            return Err(DetectError::Buffer("edge method: no setup".into()));
+        };
+        self.last = edge.process(&smoothed.data, mask, &mut self.rows)?;
+        Ok(())
+    }
+
+    /// What the edge detector did in the last frame.
+    pub fn last(&self) -> EdgeResult {
+        self.last
+    }
+
+    /// The edge detector (once it ran) beside the rows it found, the rows to change.
+    pub fn parts_mut(&mut self) -> (Option<&EdgeDetector>, &mut Vec<Row>) {
+        (self.detector.as_ref(), &mut self.rows)
+    }
+
+    /// The edge detector's state after the last frame (edges, chains, sections), once it
+    /// ran.
+    pub fn detector(&self) -> Option<&EdgeDetector> {
+        self.detector.as_ref()
+    }
+}

@@ -1,0 +1,102 @@
+//! The row-detection methods behind one trait, and the choice of method for a lens.
+//!
+//! A method turns a frame's prepared points ([`Frame`]: the kept points, the preparer with
+//! its smoothed image and refit, the vanishing-point stage) into rows, optionally within a
+//! window around the tracker's predicted vanishing point, in two steps around the vote for
+//! the vanishing point that the detector runs between them: [`RowMethod::rows`] (the rows
+//! and their weights in the vote) and [`RowMethod::finish`] (the method's own refinement of
+//! rows and vanishing point once the vote has spoken). A step two methods share is a stage
+//! both call (the Hough transform, the edge detector, the refit, the polish, the centre
+//! lines), never one method calling into another.
+//!
+//! The methods: [`hough`] and [`edge`], the paper's two components; [`combined`], the
+//! paper's combination (eq. 5), the choice for omnidirectional lenses; [`strips`], the
+//! choice for forward-looking perspective cameras. [`choose`] is the rule behind
+//! `method = "auto"`.
+
+pub mod combined;
+pub mod edge;
+pub mod hough;
+pub mod pencil;
+pub mod strips;
+
+use super::prepare::{Points, PrepareResult, Preparer};
+use super::types::{DetectError, Detection, Method};
+use super::vanishing::VanishingStage;
+use crate::camera::Mounting;
+use nalgebra::Vector3;
+use std::any::Any;
+
+/// What a method works on in one frame.
+pub struct Frame<'a> {
+    /// The points the preparation kept.
+    pub points: &'a Points,
+    /// The preparation, with the frame's smoothed vegetation image and the refit on it.
+    pub prep: &'a mut Preparer,
+    /// What the preparation did (whether its setup was rebuilt for this image).
+    pub prepared: PrepareResult,
+    /// The vanishing-point stage (its window already set to the frame's).
+    pub vanish: &'a mut VanishingStage,
+    /// The window around a predicted vanishing point the rows must pass through (unit
+    /// direction, camera frame; half-width, radians), if any.
+    pub window: Option<(Vector3<f64>, f64)>,
+    /// False when the method already ran on these points (the full search after a narrowed
+    /// one): evidence that does not depend on the window (the edge detector's boundaries)
+    /// is kept from that run.
+    pub fresh: bool,
+}
+
+/// A row-detection method.
+pub trait RowMethod: Send + std::fmt::Debug {
+    /// Which method this is.
+    fn method(&self) -> Method;
+
+    /// Whether the method's search can be narrowed to a window around a predicted
+    /// vanishing point; one that cannot always searches everywhere.
+    fn narrows(&self) -> bool {
+        true
+    }
+
+    /// The frame's rows into `out.rows` (cleared by the caller), and each row's weight in
+    /// the vote for the vanishing point into `weights` (one per row).
+    fn rows(
+        &mut self,
+        frame: &mut Frame<'_>,
+        out: &mut Detection,
+        weights: &mut Vec<f64>,
+    ) -> Result<(), DetectError>;
+
+    /// After the vote (`out` holds its vanishing point and quality, `weights` the rows'
+    /// weights in it): the method's own refinement of the rows and the vanishing point.
+    fn finish(
+        &mut self,
+        frame: &mut Frame<'_>,
+        out: &mut Detection,
+        weights: &[f64],
+    ) -> Result<(), DetectError>;
+
+    /// The method as `Any`, for its own diagnostics ([`super::Detector::method_as`]).
+    fn as_any(&self) -> &dyn Any;
+    fn as_any_mut(&mut self) -> &mut dyn Any;
+}
+
+/// Fields of view narrower than this extent (radians, the square root of the solid angle:
+/// about a 115° × 115° perspective view) are a perspective camera's.
+pub const NARROW_EXTENT_RAD: f64 = 2.0;
+
+/// The method `auto` stands for on a field of view of extent `extent_rad` (the square
+/// root of its solid angle, [`crate::detect::scale::AngularResolution`]), mounted as `m`: the
+/// strips method for a narrow field of view looking forward (a perspective camera seeing
+/// the rows converge ahead, where the strips' peaks lined up through the vanishing point
+/// hold on real crop images: docs/real.md), the Hough method for a narrow one looking
+/// down (the strips need a horizon), and the paper's combined method for an
+/// omnidirectional lens, which sees the rows all around.
+pub fn choose(extent_rad: f64, m: &Mounting) -> Method {
+    if extent_rad >= NARROW_EXTENT_RAD {
+        Method::Combined
+    } else if super::strips::looks_forward(m) {
+        Method::Strips
+    } else {
+        Method::Pencil
+    }
+}
