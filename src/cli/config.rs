@@ -80,8 +80,7 @@ pub fn detector_defaults() -> anyhow::Result<String> {
          # (`omnirow config detector --calib FILE` shows their values in force): angle_scale,\n\
          # hough.phi_bins, hough.theta_bins, hough.min_tolerance_deg, hough.merge_angle_deg,\n\
          # vanishing.azimuth_bins, vanishing.elevation_bin_deg, vanishing.inlier_deg,\n\
-         # vanishing.min_spread_deg, combined.pair_max_deg, pencil.polish_max_band_deg,\n\
-         # edge.merge.max_angle_rad.\n",
+         # vanishing.min_spread_deg, combined.pair_max_deg, pencil.polish_max_band_deg.\n",
     )
 }
 

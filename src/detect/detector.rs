@@ -13,7 +13,7 @@
 
 use super::centre::CentreLines;
 use super::combine::{consensus_score, pair_edge_rows, precision_fit, EDGE_PAIR_FACTOR};
-use super::edge::{EdgeDetector, EdgeError, EdgeResult};
+use super::edge::{EdgeDetector, EdgeError, EdgeParams, EdgeResult, REFERENCE_MAX_ANGLE_RAD};
 use super::hough::{HoughResult, HoughRows};
 use super::mask::{build_mask, find_fov, MaskResult};
 pub use super::options::{Binning, CombinedOptions, DetectorOptions, REFERENCE_PAIR_MAX_DEG};
@@ -511,6 +511,9 @@ pub struct Detector {
     /// The edge method, set up for the working image size (built at the first image and
     /// again whenever the preparer's setup is rebuilt).
     edge: Option<EdgeDetector>,
+    /// The edge method's parameters: the options' and the merge angle scaled as the other
+    /// angular options are.
+    edge_params: EdgeParams,
     edge_rows: Vec<Row>,
     /// The edge method's chords turned to their tangents on a curved field.
     bend: super::chords::ChordBend,
@@ -548,7 +551,7 @@ impl Detector {
     /// option left absent is derived from the calibration's field of view
     /// ([`super::scale::resolve`]); [`Detector::options`] gives the values in force.
     pub fn new(cal: &Calibration, opts: DetectorOptions) -> Result<Self, DetectError> {
-        let opts = super::scale::resolve(cal, &opts)?.0;
+        let (opts, scales) = super::scale::resolve(cal, &opts)?;
         let w = opts.combined.edge_weight;
         if !(w > 0.0 && w < 1.0) {
             return Err(DetectError::Options(format!(
@@ -567,8 +570,10 @@ impl Detector {
                 "combined.precision_floor_mrad = {f} must be within (0, 100)"
             )));
         }
-        // Check the edge options now rather than at the first image.
-        opts.edge.validate()?;
+        // Check the edge parameters now rather than at the first image.
+        let edge_params =
+            EdgeParams::from_options(&opts.edge, REFERENCE_MAX_ANGLE_RAD * scales.factor);
+        edge_params.validate()?;
         opts.strips.validate()?;
         let strips = match opts.method {
             Method::Strips => Some(StripsRows::new(
@@ -591,6 +596,7 @@ impl Detector {
             },
             opts,
             edge: None,
+            edge_params,
             edge_rows: Vec::with_capacity(64),
             bend: Default::default(),
             last_bend: None,
@@ -1271,7 +1277,7 @@ impl Detector {
             Some(e) => self.last_prepare.setup_rebuilt || e.size() != (w, h),
         };
         if stale {
-            self.edge = Some(EdgeDetector::new(cal, w, h, self.opts.edge)?);
+            self.edge = Some(EdgeDetector::new(cal, w, h, self.edge_params)?);
         }
         let Some(edge) = self.edge.as_mut() else {
             return Err(DetectError::Buffer("edge method: no setup".into()));
@@ -1358,7 +1364,6 @@ pub fn direction_to_pixel(cal: &Calibration, dir: &Vector3<f64>) -> Option<[f64;
 mod tests {
     use super::*;
     use crate::camera::ideal_fisheye;
-    use crate::detect::edge::EdgeOptions;
 
     #[test]
     fn auto_is_default_and_resolves_by_the_lens() {
@@ -1408,24 +1413,18 @@ mod tests {
             assert!(e.contains("edge_weight"), "{e}");
         }
         let o: DetectorOptions = toml::from_str(
-            "method = \"edge\"\n[edge.split]\ntolerance_px = 2.0\n[combined]\nedge_weight = 0.5\n",
+            "method = \"edge\"\n[edge]\nmin_support = 12\n[combined]\nedge_weight = 0.5\n",
         )
         .unwrap();
         assert_eq!(o.method, Method::Edge);
-        assert_eq!(o.edge.split.tolerance_px, 2.0);
+        assert_eq!(o.edge.min_support, 12);
         assert_eq!(o.combined.edge_weight, 0.5);
-        let bad = DetectorOptions {
-            edge: EdgeOptions {
-                split: crate::detect::edge::SplitOptions {
-                    tolerance_px: -1.0,
-                    ..Default::default()
-                },
-                ..Default::default()
-            },
-            ..Default::default()
-        };
-        let e = Detector::new(&cal, bad).unwrap_err().to_string();
-        assert!(e.contains("tolerance_px"), "{e}");
+        let d = Detector::new(&cal, o).unwrap();
+        assert_eq!(d.edge_params.merge.min_support, 12);
+        let e = toml::from_str::<DetectorOptions>("[edge.split]\ntolerance_px = 2.0\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("split"), "{e}");
     }
 
     #[test]

@@ -212,10 +212,6 @@ pub fn resolve(
     o.strips
         .polish_max_band_deg
         .get_or_insert(angle(super::strips::REFERENCE_POLISH_MAX_BAND_DEG));
-    o.edge
-        .merge
-        .max_angle_rad
-        .get_or_insert(angle(super::edge::merge::REFERENCE_MAX_ANGLE_RAD));
     Ok((
         o,
         Scales {
@@ -305,8 +301,8 @@ pub fn scales_report(cal: &Calibration, opts: &DetectorOptions) -> Result<String
             opts.strips.polish_max_band_deg(),
         ),
         (
-            "edge.merge.max_angle_rad",
-            opts.edge.merge.max_angle_rad().to_degrees(),
+            "edge merge angle",
+            (super::edge::REFERENCE_MAX_ANGLE_RAD * sc.factor).to_degrees(),
         ),
     ] {
         line(format!("  {name:<28} {d:>7.3} deg = {:>7.2} px", px(d)));
@@ -315,11 +311,6 @@ pub fn scales_report(cal: &Calibration, opts: &DetectorOptions) -> Result<String
     for (name, l) in [
         ("smooth.sigma_px", opts.smooth.sigma_px),
         ("refit.margin_px", opts.refit.margin_px),
-        ("edge.split.tolerance_px", opts.edge.split.tolerance_px),
-        (
-            "edge.merge.max_residual_px",
-            opts.edge.merge.max_residual_px,
-        ),
         ("pencil.bin_px", pe.bin_px),
         ("pencil.reference_px", pe.reference_px),
         ("pencil.search_step_px", pe.search_step_px),
@@ -412,7 +403,6 @@ mod tests {
         assert!((r - 1.319 / 0.547).abs() < 0.25, "{s3:?} {s9:?}");
         assert_eq!(o3.hough.phi_bins, Some((90.0 / s3.factor).round() as usize));
         assert_eq!(o9.vanishing.inlier_deg, Some(s9.factor));
-        assert_eq!(o9.edge.merge.max_angle_rad, Some(0.005 * s9.factor));
     }
 
     #[test]
