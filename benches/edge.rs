@@ -10,7 +10,7 @@
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use omnirow::camera::{ideal_fisheye, ideal_pal};
-use omnirow::detect::edge::{Canny, CannyOptions, EdgeDetector, EdgeOptions};
+use omnirow::detect::edge::{Canny, CannyParams, EdgeDetector, EdgeParams};
 use omnirow::detect::{Detection, Detector, DetectorOptions, Method};
 use omnirow::frame::ImageView;
 use omnirow::synth::{random_scene, render, Protocol};
@@ -72,7 +72,7 @@ fn bench(c: &mut Criterion) {
         // Canny alone on the detector's working image (smoothed vegetation, 1224×1025).
         let (smoothed, mask) = working.unwrap();
         let (ww, wh) = (smoothed.width, smoothed.height);
-        let mut canny = Canny::new(CannyOptions::default()).unwrap();
+        let mut canny = Canny::new(CannyParams::default()).unwrap();
         let mut edges = vec![0u8; ww * wh];
         g.bench_function("canny_working_image", |b| {
             b.iter(|| {
@@ -87,8 +87,8 @@ fn bench(c: &mut Criterion) {
         let full_mask: Vec<u8> = (0..W * H)
             .map(|i| cal.pixel_in_fov((i / W) as f64, (i % W) as f64) as u8)
             .collect();
-        let opts = EdgeOptions {
-            canny: CannyOptions {
+        let opts = EdgeParams {
+            canny: CannyParams {
                 sigma: 1.4,
                 ..Default::default()
             },

@@ -4,12 +4,12 @@
 
 use nalgebra::Vector3;
 use omnirow::camera::{ideal_fisheye, Calibration};
-use omnirow::detect::edge::{Canny, CannyOptions, EdgeDetector, EdgeOptions};
+use omnirow::detect::edge::{Canny, CannyParams, EdgeDetector, EdgeParams};
 
 /// Standalone on an unsmoothed full-size image: smooth, and halve it as the detector would.
-fn standalone() -> EdgeOptions {
-    EdgeOptions {
-        canny: CannyOptions {
+fn standalone() -> EdgeParams {
+    EdgeParams {
+        canny: CannyParams {
             sigma: 1.4,
             ..Default::default()
         },

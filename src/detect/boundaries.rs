@@ -5,7 +5,9 @@
 //! preparation's setup is rebuilt), and its rows, the boundary lines, of the last frame. The
 //! stage the edge and the combined methods share.
 
-use super::edge::{EdgeDetector, EdgeError, EdgeOptions, EdgeResult};
+use super::edge::{
+    EdgeDetector, EdgeError, EdgeOptions, EdgeParams, EdgeResult, REFERENCE_MAX_ANGLE_RAD,
+};
 use super::prepare::Preparer;
 use super::types::{DetectError, Row};
 
@@ -22,7 +24,7 @@ impl From<EdgeError> for DetectError {
 /// The edge detector of the frames and its last rows.
 #[derive(Debug, Clone)]
 pub struct Boundaries {
-    params: EdgeOptions,
+    params: EdgeParams,
     detector: Option<EdgeDetector>,
     /// The boundary lines of the last frame.
     pub rows: Vec<Row>,
@@ -33,11 +35,7 @@ impl Boundaries {
     /// The stage for the `[detector.edge]` options, its angular scales at `angle_factor`
     /// times their reference values.
     pub fn new(opts: &EdgeOptions, angle_factor: f64) -> Result<Self, DetectError> {
-        let mut params = *opts;
-        params
-            .merge
-            .max_angle_rad
-            .get_or_insert(super::edge::merge::REFERENCE_MAX_ANGLE_RAD * angle_factor);
+        let params = EdgeParams::from_options(opts, REFERENCE_MAX_ANGLE_RAD * angle_factor);
         params.validate()?;
         Ok(Boundaries {
             params,

@@ -80,30 +80,84 @@ pub fn build_mask(
     }
     let (h, w) = (cal.model.height as usize, cal.model.width as usize);
     if let Some(u) = user {
-        if u.width == 0 || u.height == 0 || u.data.len() != u.width * u.height {
-            return Err(DetectError::Mask(format!(
-                "user mask image {}x{} is empty or inconsistent",
-                u.height, u.width
-            )));
-        }
-        let (fa, fb) = (u.width as f64 / w as f64, u.height as f64 / h as f64);
-        if (fa - fb).abs() > 0.02 * fa.max(fb) {
-            return Err(DetectError::Mask(format!(
-                "user mask image {}x{} does not have the image's aspect ({}x{})",
-                u.height, u.width, h, w
-            )));
-        }
+        check_user_mask(u, w, h)?;
     }
     // Tables of the whole working image, read every frame: on huge pages where there are.
-    mask.clear();
-    crate::memory::reserve_huge(mask, w * h);
-    mask.resize(w * h, 0);
-    rays.clear();
-    crate::memory::reserve_huge(rays, w * h);
-    rays.resize(w * h, [0.0; 3]);
-    solid.clear();
-    crate::memory::reserve_huge(solid, w * h);
-    solid.resize(w * h, 0.0);
+    reset_huge(mask, w * h, 0);
+    reset_huge(rays, w * h, [0.0; 3]);
+    reset_huge(solid, w * h, 0.0);
+    let res = fill_tables(cal, opts, max_tilt_deg, user, mask, rays, solid);
+    if res.valid == 0 {
+        return Err(DetectError::Mask(format!(
+            "no pixel of the {h}x{w} image is inside the field of view (mask {:?}, sky above {} deg)",
+            cal.mask, max_tilt_deg
+        )));
+    }
+    Ok(res)
+}
+
+/// Checks that a user mask image is not empty and has the working image's aspect (`w`×`h`).
+fn check_user_mask(u: &GreyImage, w: usize, h: usize) -> Result<(), DetectError> {
+    if u.width == 0 || u.height == 0 || u.data.len() != u.width * u.height {
+        return Err(DetectError::Mask(format!(
+            "user mask image {}x{} is empty or inconsistent",
+            u.height, u.width
+        )));
+    }
+    let (fa, fb) = (u.width as f64 / w as f64, u.height as f64 / h as f64);
+    if (fa - fb).abs() > 0.02 * fa.max(fb) {
+        return Err(DetectError::Mask(format!(
+            "user mask image {}x{} does not have the image's aspect ({}x{})",
+            u.height, u.width, h, w
+        )));
+    }
+    Ok(())
+}
+
+/// Empties `v` and fills it with `len` copies of `value`, on huge pages where there are.
+fn reset_huge<T: Clone>(v: &mut Vec<T>, len: usize, value: T) {
+    v.clear();
+    crate::memory::reserve_huge(v, len);
+    v.resize(len, value);
+}
+
+/// The radii (pixels) between which the field of view is used: the calibration's mask shrunk
+/// by the margin, or everything when it has none.
+fn fov_radii(fov: Option<FovMask>, margin_px: f64) -> (f64, f64) {
+    match fov {
+        Some(m) => (
+            if m.inner_radius_px > 0.0 {
+                m.inner_radius_px + margin_px
+            } else {
+                0.0
+            },
+            m.outer_radius_px - margin_px,
+        ),
+        None => (0.0, f64::INFINITY),
+    }
+}
+
+/// Whether the user mask image keeps working pixel (`r`, `c`) of an `h`×`w` image (the
+/// user image's pixel under its centre is at least 128).
+fn user_keeps(u: &GreyImage, r: usize, c: usize, h: usize, w: usize) -> bool {
+    let ur = ((r as f64 + 0.5) * u.height as f64 / h as f64) as usize;
+    let uc = ((c as f64 + 0.5) * u.width as f64 / w as f64) as usize;
+    u.get(ur.min(u.height - 1), uc.min(u.width - 1)) >= 128
+}
+
+/// Writes the mask, ray and solid-angle tables (already zeroed and sized) pixel by pixel:
+/// a pixel is used when it lies within the field of view's radii, the user mask keeps it,
+/// its ray is within the lens's range of elevations, and it is not sky.
+fn fill_tables(
+    cal: &Calibration,
+    opts: &MaskOptions,
+    max_tilt_deg: f64,
+    user: Option<&GreyImage>,
+    mask: &mut [u8],
+    rays: &mut [[f32; 3]],
+    solid: &mut [f32],
+) -> MaskResult {
+    let (h, w) = (cal.model.height as usize, cal.model.width as usize);
     let model = &cal.model;
     let omega = |r: f64, c: f64| -> f64 {
         let dr = model.cam2world(r + 0.5, c) - model.cam2world(r - 0.5, c);
@@ -114,17 +168,7 @@ pub fn build_mask(
     let rot = cal.mounting.robot_from_camera();
     let sin_tilt = max_tilt_deg.to_radians().sin();
     let (tlo, thi) = cal.model.theta_range();
-    let (inner, outer) = match cal.mask {
-        Some(m) => (
-            if m.inner_radius_px > 0.0 {
-                m.inner_radius_px + opts.fov_margin_px
-            } else {
-                0.0
-            },
-            m.outer_radius_px - opts.fov_margin_px,
-        ),
-        None => (0.0, f64::INFINITY),
-    };
+    let (inner, outer) = fov_radii(cal.mask, opts.fov_margin_px);
     let mut res = MaskResult::default();
     for r in 0..h {
         for c in 0..w {
@@ -133,12 +177,8 @@ pub fn build_mask(
             if rad < inner || rad > outer {
                 continue;
             }
-            if let Some(u) = user {
-                let ur = ((r as f64 + 0.5) * u.height as f64 / h as f64) as usize;
-                let uc = ((c as f64 + 0.5) * u.width as f64 / w as f64) as usize;
-                if u.get(ur.min(u.height - 1), uc.min(u.width - 1)) < 128 {
-                    continue;
-                }
+            if user.is_some_and(|u| !user_keeps(u, r, c, h, w)) {
+                continue;
             }
             let ray = cal.model.cam2world(r as f64, c as f64);
             let theta = ray.z.atan2(ray.x.hypot(ray.y));
@@ -155,13 +195,7 @@ pub fn build_mask(
             res.valid += 1;
         }
     }
-    if res.valid == 0 {
-        return Err(DetectError::Mask(format!(
-            "no pixel of the {h}x{w} image is inside the field of view (mask {:?}, sky above {} deg)",
-            cal.mask, max_tilt_deg
-        )));
-    }
-    Ok(res)
+    res
 }
 
 /// Finds the lens's image circle (and a catadioptric lens's blind disc) from an image.
@@ -172,8 +206,6 @@ pub fn build_mask(
 /// circle is flat; when the scene reaches the image corners, the circle is larger than the
 /// sensor. A blind disc is a flat dark region around the centre. Radii in image pixels.
 pub fn find_fov(view: &ImageView, centre: (f64, f64)) -> Result<FovMask, DetectError> {
-    const ANGLES: usize = 720;
-    let (h, w) = (view.height as f64, view.width as f64);
     let err = |problem: String| DetectError::Image {
         height: view.height,
         width: view.width,
@@ -182,8 +214,34 @@ pub fn find_fov(view: &ImageView, centre: (f64, f64)) -> Result<FovMask, DetectE
     if view.width < 8 || view.height < 8 {
         return Err(err("too small to find the lens's image circle".into()));
     }
-    let (cr, cc) = centre;
-    let max_r = [
+    let max_r = corner_radius(view, centre);
+    let stats = radial_stats(view, centre, max_r);
+    let mut sds: Vec<f64> = stats.iter().flatten().map(|s| s.1).collect();
+    if sds.is_empty() {
+        return Err(err("no pixels around the calibration's centre".into()));
+    }
+    sds.sort_by(f64::total_cmp);
+    let textured = sds[sds.len() * 3 / 4];
+    if textured < 8.0 {
+        return Err(err(format!(
+            "image has no texture to find the lens's image circle in (angular deviation {textured:.1})"
+        )));
+    }
+    let flat_sd = (0.2 * textured).max(4.0);
+    let outer = rim_radius(&stats, max_r, flat_sd);
+    let inner = blind_disc_radius(&stats, outer, flat_sd);
+    let m = FovMask {
+        inner_radius_px: inner,
+        outer_radius_px: outer,
+    };
+    m.validate().map_err(err)?;
+    Ok(m)
+}
+
+/// The distance (pixels, rounded up) from `centre` to the farthest corner of the image.
+fn corner_radius(view: &ImageView, (cr, cc): (f64, f64)) -> usize {
+    let (h, w) = (view.height as f64, view.width as f64);
+    [
         (0.0, 0.0),
         (0.0, w - 1.0),
         (h - 1.0, 0.0),
@@ -192,12 +250,18 @@ pub fn find_fov(view: &ImageView, centre: (f64, f64)) -> Result<FovMask, DetectE
     .iter()
     .map(|&(r, c): &(f64, f64)| (r - cr).hypot(c - cc))
     .fold(0.0, f64::max)
-    .ceil() as usize;
+    .ceil() as usize
+}
+
+/// Per radius 0..=`max_r` around `centre`: the mean and standard deviation of the brightness
+/// over 720 angles, of the samples inside the image (`None` when fewer than 8 are).
+fn radial_stats(view: &ImageView, (cr, cc): (f64, f64), max_r: usize) -> Vec<Option<(f64, f64)>> {
+    const ANGLES: usize = 720;
+    let (h, w) = (view.height as f64, view.width as f64);
     let dirs: Vec<(f64, f64)> = (0..ANGLES)
         .map(|k| (k as f64 * std::f64::consts::TAU / ANGLES as f64).sin_cos())
         .collect();
-    // Per radius: mean and standard deviation over the angles inside the image.
-    let stats: Vec<Option<(f64, f64)>> = (0..=max_r)
+    (0..=max_r)
         .map(|rad| {
             let (mut s, mut s2, mut n) = (0.0, 0.0, 0u32);
             for &(sa, ca) in &dirs {
@@ -215,33 +279,29 @@ pub fn find_fov(view: &ImageView, centre: (f64, f64)) -> Result<FovMask, DetectE
                 (m, (s2 / n as f64 - m * m).max(0.0).sqrt())
             })
         })
-        .collect();
-    let mut sds: Vec<f64> = stats.iter().flatten().map(|s| s.1).collect();
-    if sds.is_empty() {
-        return Err(err("no pixels around the calibration's centre".into()));
-    }
-    sds.sort_by(f64::total_cmp);
-    let textured = sds[sds.len() * 3 / 4];
-    if textured < 8.0 {
-        return Err(err(format!(
-            "image has no texture to find the lens's image circle in (angular deviation {textured:.1})"
-        )));
-    }
-    let flat_sd = (0.2 * textured).max(4.0);
-    let is_flat = |s: &Option<(f64, f64)>| !s.is_some_and(|(_, sd)| sd >= flat_sd);
-    // The rim: scanning inwards, the first radius textured for three radii in a row (a
-    // lone textured radius in the dark is noise). Textured within 2% of the corners: the
-    // circle is larger than the sensor.
+        .collect()
+}
+
+/// The rim: scanning inwards, the first radius textured (deviation at least `flat_sd`) for
+/// three radii in a row (a lone textured radius in the dark is noise), plus half a pixel.
+/// Textured within 2% of the corners: the circle is larger than the sensor, and the rim is
+/// `max_r`.
+fn rim_radius(stats: &[Option<(f64, f64)>], max_r: usize, flat_sd: f64) -> f64 {
     let band = (max_r / 50).max(3);
-    let textured_at = |r: usize| !is_flat(&stats[r]);
+    let textured_at = |r: usize| stats[r].is_some_and(|(_, sd)| sd >= flat_sd);
     let first = (2..=max_r)
         .rev()
         .find(|&r| textured_at(r) && textured_at(r - 1) && textured_at(r - 2));
-    let outer = match first {
+    match first {
         Some(r) if r + band <= max_r => r as f64 + 0.5,
         _ => max_r as f64,
-    };
-    // A blind disc: flat and dark around the centre.
+    }
+}
+
+/// A blind disc's radius: the flat radii (deviation below `flat_sd`) darker than half the
+/// mean brightness inside the rim, from the centre out; 0 when they end within 3% of the rim
+/// radius `outer` (no disc).
+fn blind_disc_radius(stats: &[Option<(f64, f64)>], outer: f64, flat_sd: f64) -> f64 {
     let inside_mean = {
         let v: Vec<f64> = stats
             .iter()
@@ -263,12 +323,7 @@ pub fn find_fov(view: &ImageView, centre: (f64, f64)) -> Result<FovMask, DetectE
             }
         }
     }
-    let m = FovMask {
-        inner_radius_px: inner,
-        outer_radius_px: outer,
-    };
-    m.validate().map_err(err)?;
-    Ok(m)
+    inner
 }
 
 #[cfg(test)]

@@ -9,8 +9,7 @@
 //! configuration still setting one is told so ([`crate::config`]).
 
 use super::combine::REFERENCE_PAIR_MAX_DEG;
-use super::edge::merge::REFERENCE_MAX_ANGLE_RAD;
-use super::edge::EdgeOptions;
+use super::edge::{EdgeOptions, REFERENCE_MAX_ANGLE_RAD};
 use super::hough::{HoughOptions, HoughParams};
 use super::mask::MaskOptions;
 use super::method::combined::CombinedOptions;
@@ -131,6 +130,12 @@ pub const REMOVED: &[&str] = &[
     "refit.section_huber",
     "refit.section_power",
     "refit.near_min_sigma",
+    "edge.mask_margin_px",
+    "edge.downsample",
+    "edge.canny",
+    "edge.chains",
+    "edge.split",
+    "edge.merge",
     "combined.precision_weighting",
     "combined.precision_floor_mrad",
     "combined.consensus",
@@ -178,7 +183,6 @@ impl DetectorOptions {
         self.threshold.validate()?;
         self.hough.validate()?;
         self.refit.validate()?;
-        self.edge.validate()?;
         self.combined.validate()?;
         self.pencil.validate()?;
         self.strips.validate()?;

@@ -91,13 +91,33 @@ pub fn keep_brightest(
         return Err(DetectError::Buffer("threshold: image too large".into()));
     }
     out.clear();
-    // Masked pixels land in bin 0 (mask bytes are 0 or 0xFF). Four histograms interleaved
-    // so that runs of equal values do not serialise on one counter.
-    // Blocks the mask leaves out whole (a lens's image circle leaves a third of the frame
-    // black) are only counted into bin 0.
+    let hist = histogram(image, mask);
+    let valid = valid_pixels(mask);
+    let median = median(&hist, image.len() as u64 - valid, valid);
+    let lo = opts.min_level() as usize + 1;
+    let candidates: u64 = hist[lo.min(256)..].iter().map(|&c| c as u64).sum();
+    let (level, stride) = choose_level(&hist, opts.target_points() as u64, lo, candidates);
+    let level_u8 = level.min(255) as u8;
+    collect_kept(image, mask, level_u8, level_u8 as usize >= lo, stride, out);
+    Ok(ThresholdResult {
+        level: level_u8,
+        stride,
+        kept: out.len(),
+        candidates: candidates as usize,
+        median,
+    })
+}
+
+/// Pixels are visited in blocks of this many, so that blocks the mask leaves out whole (a
+/// lens's image circle leaves a third of the frame black) are passed over.
+const BLOCK: usize = 64;
+
+/// The histogram of `image` where `mask` is set; masked pixels land in bin 0 (mask bytes are
+/// 0 or 0xFF). Four histograms are interleaved so that runs of equal values do not serialise
+/// on one counter, and blocks the mask leaves out whole are only counted into bin 0.
+fn histogram(image: &[u8], mask: &[u8]) -> [u32; 256] {
     let mut hists = [[0u32; 256]; 4];
     let mut outside = 0u32;
-    const BLOCK: usize = 64;
     for (vb, mb) in image.chunks(BLOCK).zip(mask.chunks(BLOCK)) {
         if mb.iter().fold(0u8, |a, &m| a | m) == 0 {
             outside += mb.len() as u32;
@@ -120,32 +140,38 @@ pub fn keep_brightest(
     for (i, h) in hist.iter_mut().enumerate() {
         *h = hists[0][i] + hists[1][i] + hists[2][i] + hists[3][i];
     }
-    // Counted in runs with 32-bit lanes, which vectorise four times wider than 64-bit ones.
-    let valid: u64 = mask
-        .chunks(1 << 20)
+    hist
+}
+
+/// The number of valid (unmasked) pixels, counted in runs with 32-bit lanes, which vectorise
+/// four times wider than 64-bit ones.
+fn valid_pixels(mask: &[u8]) -> u64 {
+    mask.chunks(1 << 20)
         .map(|c| c.iter().map(|&m| (m & 1) as u32).sum::<u32>() as u64)
-        .sum();
-    // Median of the valid pixels: masked pixels sit in bin 0 with the valid zeros.
-    let median = {
-        let masked = image.len() as u64 - valid;
-        let mut acc = 0u64;
-        let half = masked + valid / 2;
-        let mut m = 0u8;
-        for (v, &c) in hist.iter().enumerate() {
-            acc += c as u64;
-            if acc > half {
-                m = v as u8;
-                break;
-            }
+        .sum()
+}
+
+/// The median of the `valid` pixels in `hist`, where the `masked` pixels sit in bin 0 with
+/// the valid zeros.
+fn median(hist: &[u32; 256], masked: u64, valid: u64) -> u8 {
+    let mut acc = 0u64;
+    let half = masked + valid / 2;
+    for (v, &c) in hist.iter().enumerate() {
+        acc += c as u64;
+        if acc > half {
+            return v as u8;
         }
-        m
-    };
-    let n = opts.target_points() as u64;
+    }
+    0
+}
+
+/// The level and the stride that keep about `n` pixels. The level descends from 255 until
+/// the pixels at or above it reach `n`; when the `candidates` (the pixels at `lo` or above)
+/// are fewer, the level is `lo` and all are kept. Of the pixels at the level, every
+/// stride-th is kept (`u32::MAX`: none).
+fn choose_level(hist: &[u32; 256], n: u64, lo: usize, candidates: u64) -> (usize, u32) {
     let mut above: u64 = 0; // pixels with value > level
     let mut level = 255usize;
-    let lo = opts.min_level() as usize + 1;
-    let candidates: u64 = hist[lo.min(256)..].iter().map(|&c| c as u64).sum();
-    // Descend until the pixels at >= level reach N.
     while level >= lo {
         let at = hist[level] as u64;
         if above + at >= n {
@@ -166,14 +192,25 @@ pub fn keep_brightest(
     } else {
         at_level.div_ceil(want_at).max(1) as u32
     };
-    let level_u8 = level.min(255) as u8;
-    // Of the pixels at the level, every `stride`-th is kept: `phase` counts down to the next.
+    (level, stride)
+}
+
+/// Appends to `out` the indices of the valid pixels above `level`, and, when `level_ok`,
+/// every `stride`-th pixel at it (in index order, starting with the first).
+fn collect_kept(
+    image: &[u8],
+    mask: &[u8],
+    level: u8,
+    level_ok: bool,
+    stride: u32,
+    out: &mut Vec<u32>,
+) {
+    // `phase` counts down to the next pixel at the level that is kept.
     let mut phase = 0u32;
-    let level_ok = level_u8 as usize >= lo;
     // Scan in blocks, skipping (with a vectorised maximum) blocks with nothing to keep.
     for (b, (vb, mb)) in image.chunks(BLOCK).zip(mask.chunks(BLOCK)).enumerate() {
         let max = vb.iter().zip(mb).fold(0u8, |a, (&v, &m)| a.max(v & m));
-        if max < level_u8 {
+        if max < level {
             continue;
         }
         // Every pixel's index is written and the end moves past the kept ones: whether a
@@ -184,10 +221,10 @@ pub fn keep_brightest(
         let mut end = start;
         for (k, (&v, &m)) in vb.iter().zip(mb).enumerate() {
             let v = v & m;
-            let at = (v == level_u8) & level_ok;
+            let at = (v == level) & level_ok;
             let take_at = at & (phase == 0);
             out[end] = (b * BLOCK + k) as u32;
-            end += ((v > level_u8) | take_at) as usize;
+            end += ((v > level) | take_at) as usize;
             phase = match (at, phase) {
                 (false, p) => p,
                 (true, 0) => stride - 1,
@@ -196,13 +233,6 @@ pub fn keep_brightest(
         }
         out.truncate(end);
     }
-    Ok(ThresholdResult {
-        level: level_u8,
-        stride,
-        kept: out.len(),
-        candidates: candidates as usize,
-        median,
-    })
 }
 
 #[cfg(test)]

@@ -1,19 +1,17 @@
-//! Canny edge detection on an 8-bit image (the vegetation or greyscale image), then the mask.
+//! Canny edge detection on an 8-bit image (the vegetation or greyscale image), inside a mask.
 //!
-//! Gaussian smoothing (fixed-point, separable; skipped when the input is already smoothed),
-//! Sobel gradients, non-maximum suppression along the quantised gradient direction, and
-//! hysteresis between a low and a high threshold, given either as absolute gradient magnitudes
-//! or as quantiles of the gradient magnitudes inside the mask. Only pixels inside the mask can
-//! be edges. [`Canny`] owns every buffer; once warmed up on an image size, `process` does not
-//! allocate.
+//! Owns the Gaussian smoothing (fixed-point, separable; skipped when `sigma` is 0 because the
+//! input is already smoothed), Sobel gradients, non-maximum suppression along the quantised
+//! gradient direction, and hysteresis between a low and a high threshold, given either as
+//! absolute gradient magnitudes or as quantiles of the gradient magnitudes inside the mask.
+//! Only pixels inside the mask can be edges. [`Canny`] owns every buffer; once warmed up on an
+//! image size, `process` does not allocate.
 
 use super::EdgeError;
 use multiversion::multiversion;
-use serde::{Deserialize, Serialize};
 
 /// How the hysteresis thresholds are given.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ThresholdMode {
     /// `low` and `high` are Sobel gradient magnitudes (0..≈1443 for 8-bit input).
     Absolute,
@@ -22,15 +20,14 @@ pub enum ThresholdMode {
     Quantile,
 }
 
-/// Options of the Canny stage.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct CannyOptions {
-    /// Standard deviation (pixels) of the Gaussian smoothing; 0 when the input is already
-    /// smoothed. Default 0: the detector hands the edge method its smoothed vegetation image
-    /// (1.4 suits an unsmoothed image).
+/// Parameters of the Canny stage.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CannyParams {
+    /// Standard deviation (pixels) of the Gaussian smoothing; 0 skips it. Default 0: the
+    /// detector hands the edge method its smoothed vegetation image (1.4 suits an unsmoothed
+    /// image).
     pub sigma: f64,
-    /// How `low` and `high` are read. Default `quantile`.
+    /// How `low` and `high` are read. Default [`ThresholdMode::Quantile`].
     pub mode: ThresholdMode,
     /// Low threshold (see [`ThresholdMode`]). Default 0.5 (half the high threshold).
     pub low: f64,
@@ -41,9 +38,9 @@ pub struct CannyOptions {
     pub min_high: f64,
 }
 
-impl Default for CannyOptions {
+impl Default for CannyParams {
     fn default() -> Self {
-        CannyOptions {
+        CannyParams {
             sigma: 0.0,
             mode: ThresholdMode::Quantile,
             low: 0.5,
@@ -53,7 +50,7 @@ impl Default for CannyOptions {
     }
 }
 
-impl CannyOptions {
+impl CannyParams {
     /// Checks that the numbers make sense.
     pub fn validate(&self) -> Result<(), EdgeError> {
         let bad = |m: String| Err(EdgeError::Options(format!("canny: {m}")));
@@ -107,7 +104,7 @@ pub const EDGE: u8 = 255;
 /// Canny edge detector owning its buffers (sized on first use, reused after).
 #[derive(Debug, Clone)]
 pub struct Canny {
-    options: CannyOptions,
+    params: CannyParams,
     kernel: Vec<u16>,
     smooth: Vec<u8>,
     row: Vec<u8>,
@@ -124,12 +121,12 @@ pub struct Canny {
 const KSHIFT: u32 = 8;
 
 impl Canny {
-    /// A detector with the given options (checked).
-    pub fn new(options: CannyOptions) -> Result<Self, EdgeError> {
-        options.validate()?;
-        let kernel = gaussian_kernel(options.sigma);
+    /// A detector with the given parameters (checked).
+    pub fn new(params: CannyParams) -> Result<Self, EdgeError> {
+        params.validate()?;
+        let kernel = gaussian_kernel(params.sigma);
         Ok(Canny {
-            options,
+            params,
             kernel,
             smooth: Vec::new(),
             row: Vec::new(),
@@ -141,14 +138,14 @@ impl Canny {
         })
     }
 
-    pub fn options(&self) -> &CannyOptions {
-        &self.options
+    pub fn params(&self) -> &CannyParams {
+        &self.params
     }
 
     /// Sizes the buffers for a `width`×`height` image (done by `process` too).
     pub fn warm_up(&mut self, width: usize, height: usize) {
         let n = width * height;
-        if self.options.sigma > 0.0 {
+        if self.params.sigma > 0.0 {
             self.smooth.resize(n, 0);
             self.row.resize(width, 0);
             self.acc.resize(width, 0);
@@ -191,7 +188,7 @@ impl Canny {
             return Ok(CannyResult::default());
         }
         self.warm_up(width, height);
-        let src: &[u8] = if self.options.sigma > 0.0 {
+        let src: &[u8] = if self.params.sigma > 0.0 {
             gaussian(
                 input,
                 width,
@@ -265,7 +262,7 @@ impl Canny {
     }
 
     fn thresholds(&mut self, width: usize, height: usize, mask: &[u8]) -> (u16, u16) {
-        let o = &self.options;
+        let o = &self.params;
         match o.mode {
             ThresholdMode::Absolute => {
                 let low = o.low.round().clamp(1.0, MAX_MAG as f64) as u16;
@@ -473,8 +470,8 @@ fn sobel(src: &[u8], width: usize, height: usize, spans: &[(usize, usize)], grad
 }
 
 /// ⌊√v⌋ for a whole number v ≤ 2·1020² (a Sobel gradient's squared length), the same as
-/// `v.sqrt() as u16`, but through the float's bits, which vectorises where the saturating
-/// conversion went lane by lane (a fifth of Canny's time). Adding 1.5·2²³ leaves no fraction
+/// `v.sqrt() as u16`, but through the float's bits, which vectorises (the saturating
+/// conversion runs lane by lane). Adding 1.5·2²³ leaves no fraction
 /// bits, so it rounds to the nearest whole number; the square root of a whole number below
 /// 2²² is whole or at least 3.4·10⁻⁴ from one, so the root less 0.49985 rounds to its floor
 /// (a test checks every Sobel gradient).
@@ -496,64 +493,104 @@ fn nms_hysteresis(
     height: usize,
     mask: &[u8],
     spans: &[(usize, usize)],
-    (low, high): (u16, u16),
+    thresholds: (u16, u16),
     edges: &mut [u8],
     stack: &mut Vec<u32>,
 ) -> usize {
     stack.clear();
-    let w = width as isize;
-    // Only the mask's columns of a row, never the border.
-    let columns = |(lo, hi): (usize, usize)| (lo.max(1), hi.min(width - 1));
     for (r, &span) in spans.iter().enumerate().take(height - 1).skip(1) {
-        let row = r * width;
-        let (lo, hi) = columns(span);
+        let (lo, hi) = nms_columns(span, width);
         if hi <= lo {
             continue;
         }
-        let inner = hi - lo;
-        // Rows above, at and below, shifted so that index i is the pixel (r, lo + i) and its
-        // neighbours; each sector picks its pair, all in straight slices so that it vectorises.
-        let up = &grad[row - width..row];
-        let mid = &grad[row..row + width];
-        let dn = &grad[row + width..row + 2 * width];
-        let (l, c, rt) = (lo - 1..hi - 1, lo..hi, lo + 1..hi + 1);
-        let (ul, uc, ur) = (&up[l.clone()], &up[c.clone()], &up[rt.clone()]);
-        let (ml, mc, mr) = (&mid[l.clone()], &mid[c.clone()], &mid[rt.clone()]);
-        let (dl, dc, dr) = (&dn[l], &dn[c.clone()], &dn[rt]);
-        let mk = &mask[row + lo..row + hi];
+        let row = r * width;
         let out = &mut edges[row + lo..row + hi];
-        for i in 0..inner {
-            let g = mc[i];
-            let m = g & MAG_MASK;
-            let sector = g >> 14;
-            // Sector 0: left/right; 1: up/down; 2: up-right/down-left; 3: up-left/down-right.
-            // Selected with bit masks rather than a match so that the loop vectorises.
-            let e0 = 0u16.wrapping_sub((sector == 0) as u16);
-            let e1 = 0u16.wrapping_sub((sector == 1) as u16);
-            let e2 = 0u16.wrapping_sub((sector == 2) as u16);
-            let e3 = 0u16.wrapping_sub((sector == 3) as u16);
-            let n1 = ((mr[i] & e0) | (dc[i] & e1) | (dl[i] & e2) | (dr[i] & e3)) & MAG_MASK;
-            let n2 = ((ml[i] & e0) | (uc[i] & e1) | (ur[i] & e2) | (ul[i] & e3)) & MAG_MASK;
-            let keep = (m >= low) & (mk[i] != 0) & (m > n1) & (m >= n2);
-            let strong = m >= high;
-            // EDGE (255) when strong, WEAK (1) otherwise, 0 when not kept.
-            out[i] = (keep as u8) * (WEAK + (strong as u8) * (EDGE - WEAK));
-        }
-        // Seeds: the strong pixels, in index order, taken while the row is in the cache, a
-        // block of the row at a time from a bit mask of its strong pixels.
-        const BLOCK: usize = 32;
-        for (b, block) in out.chunks(BLOCK).enumerate() {
-            let mut bits = block
-                .iter()
-                .enumerate()
-                .fold(0u32, |a, (k, &v)| a | ((v == EDGE) as u32) << k);
-            let start = (row + lo + b * BLOCK) as u32;
-            while bits != 0 {
-                stack.push(start + bits.trailing_zeros());
-                bits &= bits - 1;
-            }
+        suppress_row(
+            grad,
+            width,
+            r,
+            (lo, hi),
+            &mask[row + lo..row + hi],
+            thresholds,
+            out,
+        );
+        push_seeds(out, row + lo, stack);
+    }
+    connect_weak(edges, width, stack);
+    clear_weak(edges, width, height, spans)
+}
+
+/// The columns of a row's mask span that non-maximum suppression visits: never the border.
+#[inline(always)]
+fn nms_columns((lo, hi): (usize, usize), width: usize) -> (usize, usize) {
+    (lo.max(1), hi.min(width - 1))
+}
+
+/// Non-maximum suppression of row `r`'s columns `lo..hi` (`mask` and `out` are those
+/// columns): [`EDGE`] where the pixel is a local maximum across the edge reaching `high`,
+/// [`WEAK`] where it reaches only `low`, 0 elsewhere.
+#[inline(always)]
+fn suppress_row(
+    grad: &[u16],
+    width: usize,
+    r: usize,
+    (lo, hi): (usize, usize),
+    mask: &[u8],
+    (low, high): (u16, u16),
+    out: &mut [u8],
+) {
+    let row = r * width;
+    // Rows above, at and below, shifted so that index i is the pixel (r, lo + i) and its
+    // neighbours; each sector picks its pair, all in straight slices so that it vectorises.
+    let up = &grad[row - width..row];
+    let mid = &grad[row..row + width];
+    let dn = &grad[row + width..row + 2 * width];
+    let (l, c, rt) = (lo - 1..hi - 1, lo..hi, lo + 1..hi + 1);
+    let (ul, uc, ur) = (&up[l.clone()], &up[c.clone()], &up[rt.clone()]);
+    let (ml, mc, mr) = (&mid[l.clone()], &mid[c.clone()], &mid[rt.clone()]);
+    let (dl, dc, dr) = (&dn[l], &dn[c.clone()], &dn[rt]);
+    for i in 0..hi - lo {
+        let g = mc[i];
+        let m = g & MAG_MASK;
+        let sector = g >> 14;
+        // Sector 0: left/right; 1: up/down; 2: up-right/down-left; 3: up-left/down-right.
+        // Selected with bit masks rather than a match so that the loop vectorises.
+        let e0 = 0u16.wrapping_sub((sector == 0) as u16);
+        let e1 = 0u16.wrapping_sub((sector == 1) as u16);
+        let e2 = 0u16.wrapping_sub((sector == 2) as u16);
+        let e3 = 0u16.wrapping_sub((sector == 3) as u16);
+        let n1 = ((mr[i] & e0) | (dc[i] & e1) | (dl[i] & e2) | (dr[i] & e3)) & MAG_MASK;
+        let n2 = ((ml[i] & e0) | (uc[i] & e1) | (ur[i] & e2) | (ul[i] & e3)) & MAG_MASK;
+        let keep = (m >= low) & (mask[i] != 0) & (m > n1) & (m >= n2);
+        let strong = m >= high;
+        // EDGE (255) when strong, WEAK (1) otherwise, 0 when not kept.
+        out[i] = (keep as u8) * (WEAK + (strong as u8) * (EDGE - WEAK));
+    }
+}
+
+/// Pushes the indices of the strong pixels of `out` (a row's span starting at image index
+/// `start`) onto `stack` in index order, while the row is in the cache, a block of the row
+/// at a time from a bit mask of its strong pixels.
+#[inline(always)]
+fn push_seeds(out: &[u8], start: usize, stack: &mut Vec<u32>) {
+    const BLOCK: usize = 32;
+    for (b, block) in out.chunks(BLOCK).enumerate() {
+        let mut bits = block
+            .iter()
+            .enumerate()
+            .fold(0u32, |a, (k, &v)| a | ((v == EDGE) as u32) << k);
+        let first = (start + b * BLOCK) as u32;
+        while bits != 0 {
+            stack.push(first + bits.trailing_zeros());
+            bits &= bits - 1;
         }
     }
+}
+
+/// Hysteresis: every weak pixel 8-connected to a seed on `stack` becomes an edge.
+#[inline(always)]
+fn connect_weak(edges: &mut [u8], width: usize, stack: &mut Vec<u32>) {
+    let w = width as isize;
     let nb: [isize; 8] = [-w - 1, -w, -w + 1, -1, 1, w - 1, w, w + 1];
     while let Some(i) = stack.pop() {
         for o in nb {
@@ -564,11 +601,16 @@ fn nms_hysteresis(
             }
         }
     }
-    // Weak pixels left unconnected are cleared. Only the rows' spans can hold any (the rest
-    // was cleared at the start); counted per row in 32-bit lanes, which vectorise four wide.
+}
+
+/// Clears the weak pixels left unconnected and returns the number of edges. Only the rows'
+/// spans can hold any (the rest was cleared at the start); counted per row in 32-bit lanes,
+/// which vectorise four wide.
+#[inline(always)]
+fn clear_weak(edges: &mut [u8], width: usize, height: usize, spans: &[(usize, usize)]) -> usize {
     let mut count = 0usize;
     for (r, &span) in spans.iter().enumerate().take(height - 1).skip(1) {
-        let (lo, hi) = columns(span);
+        let (lo, hi) = nms_columns(span, width);
         if hi <= lo {
             continue;
         }
@@ -673,9 +715,9 @@ mod tests {
                 .map(|i| (((i % w) as f64 - mx).hypot((i / w) as f64 - my) < mr) as u8 * 255)
                 .collect();
             let options = if quantile {
-                CannyOptions { sigma: 1.0, ..Default::default() }
+                CannyParams { sigma: 1.0, ..Default::default() }
             } else {
-                CannyOptions {
+                CannyParams {
                     sigma: 0.0,
                     mode: ThresholdMode::Absolute,
                     low: (next() % 200) as f64,
@@ -722,7 +764,7 @@ mod tests {
         let img = vec![77u8; w * h];
         let mask = vec![1u8; w * h];
         let mut edges = vec![9u8; w * h];
-        let mut c = Canny::new(CannyOptions {
+        let mut c = Canny::new(CannyParams {
             sigma: 1.4,
             ..Default::default()
         })
@@ -740,7 +782,7 @@ mod tests {
         let img = disc(w, h, cx, cy, rad);
         let mask = vec![1u8; w * h];
         let mut edges = vec![0u8; w * h];
-        let mut c = Canny::new(CannyOptions {
+        let mut c = Canny::new(CannyParams {
             sigma: 1.4,
             mode: ThresholdMode::Absolute,
             low: 50.0,
@@ -787,7 +829,7 @@ mod tests {
             }
         }
         let mut edges = vec![0u8; w * h];
-        let mut c = Canny::new(CannyOptions {
+        let mut c = Canny::new(CannyParams {
             sigma: 1.4,
             ..Default::default()
         })
@@ -822,7 +864,7 @@ mod tests {
             }
             let mask = vec![1u8; w * h];
             let mut edges = vec![0u8; w * h];
-            let mut c = Canny::new(CannyOptions {
+            let mut c = Canny::new(CannyParams {
                 sigma: 1.2,
                 ..Default::default()
             })
@@ -849,7 +891,7 @@ mod tests {
         let img = disc(w, h, 25.0, 20.0, 10.0);
         let mask = vec![1u8; w * h];
         let mut edges = vec![0u8; w * h];
-        let mut c = Canny::new(CannyOptions {
+        let mut c = Canny::new(CannyParams {
             sigma: 0.0,
             mode: ThresholdMode::Absolute,
             low: 100.0,
@@ -863,7 +905,7 @@ mod tests {
         assert!(e.to_string().contains("input"), "{e}");
         let e = c.process(&img, w, h, &mask[1..], &mut edges).unwrap_err();
         assert!(e.to_string().contains("mask"), "{e}");
-        assert!(Canny::new(CannyOptions {
+        assert!(Canny::new(CannyParams {
             high: 1.5,
             ..Default::default()
         })

@@ -10,21 +10,19 @@
 use super::EdgeError;
 use crate::camera::OcamModel;
 use nalgebra::Vector3;
-use serde::{Deserialize, Serialize};
 
-/// Options of the chain stage.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct ChainOptions {
+/// Parameters of the chain stage.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ChainParams {
     /// Chains with fewer pixels are dropped (before their pixels become rays). Default 20,
     /// the splitting stage's shortest section: a shorter chain cannot give a section, and
     /// noise makes many such chains.
     pub min_length: usize,
 }
 
-impl Default for ChainOptions {
+impl Default for ChainParams {
     fn default() -> Self {
-        ChainOptions { min_length: 20 }
+        ChainParams { min_length: 20 }
     }
 }
 
@@ -76,7 +74,7 @@ pub struct ChainResult {
 /// Traces chains in edge images of one size, reusing its buffers.
 #[derive(Debug, Clone)]
 pub struct ChainTracer {
-    options: ChainOptions,
+    params: ChainParams,
     width: usize,
     height: usize,
     /// Nonzero where a pixel has been traced in the current run; reset after each run by
@@ -89,15 +87,15 @@ pub struct ChainTracer {
 }
 
 impl ChainTracer {
-    pub fn new(options: ChainOptions, width: usize, height: usize) -> Result<Self, EdgeError> {
-        if options.min_length < 2 {
+    pub fn new(params: ChainParams, width: usize, height: usize) -> Result<Self, EdgeError> {
+        if params.min_length < 2 {
             return Err(EdgeError::Options(format!(
                 "chains: min_length = {} must be at least 2",
-                options.min_length
+                params.min_length
             )));
         }
         Ok(ChainTracer {
-            options,
+            params,
             width,
             height,
             visited: vec![0; width * height],
@@ -107,8 +105,8 @@ impl ChainTracer {
         })
     }
 
-    pub fn options(&self) -> &ChainOptions {
-        &self.options
+    pub fn params(&self) -> &ChainParams {
+        &self.params
     }
 
     /// Traces the chains of `edges` (nonzero = edge pixel) and turns their pixels into rays
@@ -150,7 +148,7 @@ impl ChainTracer {
         out.clear();
         self.touched.clear();
         let mut result = ChainResult::default();
-        let min_len = self.options.min_length;
+        let min_len = self.params.min_length;
         // Scan eight bytes at a time; edge images are mostly empty.
         let mut base = 0usize;
         for chunk in edges.chunks(8) {
@@ -258,7 +256,7 @@ mod tests {
     use crate::camera::ideal_fisheye;
 
     fn tracer(w: usize, h: usize, min_length: usize) -> ChainTracer {
-        ChainTracer::new(ChainOptions { min_length }, w, h).unwrap()
+        ChainTracer::new(ChainParams { min_length }, w, h).unwrap()
     }
 
     fn is_8_connected_path(p: &[[u32; 2]]) -> bool {

@@ -13,20 +13,18 @@ use super::EdgeError;
 use crate::detect::{Method, Row};
 use crate::sphere::Scatter;
 use nalgebra::Vector3;
-use serde::{Deserialize, Serialize};
 
 use super::split::Section;
 
-/// Options of the merge stage.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct MergeOptions {
+/// Parameters of the merge stage.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MergeParams {
     /// Sections whose normals are closer than this angle (radians) may describe the same
-    /// row. Default 0.005: the two boundaries of a distant row are only a few hundredths of
-    /// a radian apart, and merging them mixes two lines into one biased normal. Absent:
-    /// derived from the calibration's field of view (0.005 at the GC2450C's;
-    /// [`crate::detect::scale`]).
-    pub max_angle_rad: Option<f64>,
+    /// row. The two boundaries of a distant row are only a few hundredths of a radian apart,
+    /// and merging them mixes two lines into one biased normal. Default
+    /// [`REFERENCE_MAX_ANGLE_RAD`]; the detector scales it with the calibration's field of
+    /// view ([`crate::detect::scale`]).
+    pub max_angle_rad: f64,
     /// The merged great circle must fit all points with an RMS distance within this many
     /// pixels (converted with the calibration's angular pixel size). Default 1.5.
     pub max_residual_px: f64,
@@ -34,20 +32,13 @@ pub struct MergeOptions {
     pub min_support: u32,
 }
 
-/// The merge angle (radians) at the reference angular resolution.
+/// The merge angle (radians) at the reference angular resolution (the GC2450C's lenses).
 pub const REFERENCE_MAX_ANGLE_RAD: f64 = 0.005;
 
-impl MergeOptions {
-    /// The merge angle (radians) in force (the option, else the reference value).
-    pub fn max_angle_rad(&self) -> f64 {
-        self.max_angle_rad.unwrap_or(REFERENCE_MAX_ANGLE_RAD)
-    }
-}
-
-impl Default for MergeOptions {
+impl Default for MergeParams {
     fn default() -> Self {
-        MergeOptions {
-            max_angle_rad: None,
+        MergeParams {
+            max_angle_rad: REFERENCE_MAX_ANGLE_RAD,
             max_residual_px: 1.5,
             min_support: 30,
         }
@@ -77,7 +68,7 @@ pub const NONE: u32 = u32::MAX;
 /// Merges sections into rows, reusing its buffers.
 #[derive(Debug, Clone)]
 pub struct Merger {
-    options: MergeOptions,
+    params: MergeParams,
     cos_angle: f64,
     max_mean_sq: f64,
     order: Vec<u32>,
@@ -90,18 +81,18 @@ pub struct Merger {
 
 impl Merger {
     /// `pixel_angle_rad` is the angle one pixel subtends (to read `max_residual_px`).
-    pub fn new(options: MergeOptions, pixel_angle_rad: f64) -> Result<Self, EdgeError> {
-        let max_angle = options.max_angle_rad();
+    pub fn new(params: MergeParams, pixel_angle_rad: f64) -> Result<Self, EdgeError> {
+        let max_angle = params.max_angle_rad;
         if !(0.0..std::f64::consts::FRAC_PI_2).contains(&max_angle) {
             return Err(EdgeError::Options(format!(
                 "merge: max_angle_rad = {} must be in [0, pi/2)",
                 max_angle
             )));
         }
-        if !(options.max_residual_px > 0.0 && options.max_residual_px.is_finite()) {
+        if !(params.max_residual_px > 0.0 && params.max_residual_px.is_finite()) {
             return Err(EdgeError::Options(format!(
                 "merge: max_residual_px = {} must be > 0",
-                options.max_residual_px
+                params.max_residual_px
             )));
         }
         if !(pixel_angle_rad > 0.0 && pixel_angle_rad < 0.5) {
@@ -109,9 +100,9 @@ impl Merger {
                 "merge: angular pixel size {pixel_angle_rad} rad is not plausible"
             )));
         }
-        let r = (options.max_residual_px * pixel_angle_rad).sin();
+        let r = (params.max_residual_px * pixel_angle_rad).sin();
         Ok(Merger {
-            options,
+            params,
             cos_angle: max_angle.cos(),
             max_mean_sq: r * r,
             order: Vec::new(),
@@ -123,8 +114,8 @@ impl Merger {
         })
     }
 
-    pub fn options(&self) -> &MergeOptions {
-        &self.options
+    pub fn params(&self) -> &MergeParams {
+        &self.params
     }
 
     /// For each section of the last run, the index of its row in the output, or [`NONE`]
@@ -146,14 +137,7 @@ impl Merger {
                 "merge: {n} sections are too many"
             )));
         }
-        self.order.clear();
-        self.order.extend(0..n as u32);
-        self.order.sort_unstable_by(|&a, &b| {
-            sections[b as usize]
-                .len()
-                .cmp(&sections[a as usize].len())
-                .then(a.cmp(&b))
-        });
+        self.order_by_length(sections);
         self.clusters.clear();
         self.next.clear();
         self.next.resize(n, NONE);
@@ -161,51 +145,81 @@ impl Merger {
         self.cluster_of.resize(n, NONE);
         for oi in 0..n {
             let si = self.order[oi] as usize;
-            let s = &sections[si];
-            let mut joined = false;
-            for ci in 0..self.clusters.len() {
-                let c = &self.clusters[ci];
-                if c.normal.dot(&s.normal).abs() < self.cos_angle {
-                    continue;
-                }
-                // Complete linkage: within the threshold of every member.
-                let mut m = c.head;
-                let mut all = true;
-                while m != NONE {
-                    if sections[m as usize].normal.dot(&s.normal).abs() < self.cos_angle {
-                        all = false;
-                        break;
-                    }
-                    m = self.next[m as usize];
-                }
-                if !all {
-                    continue;
-                }
-                let mut merged = c.scatter;
-                merged.merge(&s.scatter);
-                let Some(fit) = merged.fit() else { continue };
-                if fit.mean_sq_residual > self.max_mean_sq {
-                    continue;
-                }
-                let c = &mut self.clusters[ci];
-                c.scatter = merged;
-                c.normal = fit.normal;
-                self.next[si] = c.head;
-                c.head = si as u32;
-                self.cluster_of[si] = ci as u32;
-                joined = true;
-                break;
-            }
-            if !joined {
+            if !self.join(sections, si) {
                 self.cluster_of[si] = self.clusters.len() as u32;
                 self.clusters.push(Cluster {
-                    scatter: s.scatter,
-                    normal: s.normal,
+                    scatter: sections[si].scatter,
+                    normal: sections[si].normal,
                     head: si as u32,
                 });
             }
         }
-        // Rows by decreasing support, ties by first appearance.
+        let result = self.write_rows(rows);
+        self.assignment.clear();
+        for &c in &self.cluster_of {
+            self.assignment.push(self.row_of_cluster[c as usize]);
+        }
+        Ok(result)
+    }
+
+    /// Puts the sections' indices in `order` by decreasing length, ties by index.
+    fn order_by_length(&mut self, sections: &[Section]) {
+        self.order.clear();
+        self.order.extend(0..sections.len() as u32);
+        self.order.sort_unstable_by(|&a, &b| {
+            sections[b as usize]
+                .len()
+                .cmp(&sections[a as usize].len())
+                .then(a.cmp(&b))
+        });
+    }
+
+    /// Adds section `si` to the first cluster that takes it: its normal within the merge
+    /// angle of the cluster's and of every member's, and the refitted great circle within
+    /// the residual. False when no cluster takes it.
+    fn join(&mut self, sections: &[Section], si: usize) -> bool {
+        let s = &sections[si];
+        for ci in 0..self.clusters.len() {
+            let c = &self.clusters[ci];
+            if c.normal.dot(&s.normal).abs() < self.cos_angle {
+                continue;
+            }
+            if !self.near_every_member(sections, c.head, &s.normal) {
+                continue;
+            }
+            let mut merged = c.scatter;
+            merged.merge(&s.scatter);
+            let Some(fit) = merged.fit() else { continue };
+            if fit.mean_sq_residual > self.max_mean_sq {
+                continue;
+            }
+            let c = &mut self.clusters[ci];
+            c.scatter = merged;
+            c.normal = fit.normal;
+            self.next[si] = c.head;
+            c.head = si as u32;
+            self.cluster_of[si] = ci as u32;
+            return true;
+        }
+        false
+    }
+
+    /// Complete linkage: whether `normal` lies within the merge angle of every member of the
+    /// cluster whose first member is `head`.
+    fn near_every_member(&self, sections: &[Section], head: u32, normal: &Vector3<f64>) -> bool {
+        let mut m = head;
+        while m != NONE {
+            if sections[m as usize].normal.dot(normal).abs() < self.cos_angle {
+                return false;
+            }
+            m = self.next[m as usize];
+        }
+        true
+    }
+
+    /// Writes the clusters with enough support to `rows` by decreasing support, ties by first
+    /// appearance, and notes each cluster's row in `row_of_cluster` ([`NONE`] if dropped).
+    fn write_rows(&mut self, rows: &mut Vec<Row>) -> MergeResult {
         self.order.clear();
         self.order.extend(0..self.clusters.len() as u32);
         let clusters = &self.clusters;
@@ -222,7 +236,7 @@ impl Merger {
         for &ci in &self.order {
             let c = &self.clusters[ci as usize];
             let support = c.scatter.count().min(u32::MAX as usize) as u32;
-            if support < self.options.min_support {
+            if support < self.params.min_support {
                 result.dropped += 1;
                 continue;
             }
@@ -235,11 +249,7 @@ impl Merger {
             });
         }
         result.rows = rows.len();
-        self.assignment.clear();
-        for &c in &self.cluster_of {
-            self.assignment.push(self.row_of_cluster[c as usize]);
-        }
-        Ok(result)
+        result
     }
 }
 
@@ -269,8 +279,8 @@ mod tests {
 
     fn merger(max_angle_rad: f64) -> Merger {
         Merger::new(
-            MergeOptions {
-                max_angle_rad: Some(max_angle_rad),
+            MergeParams {
+                max_angle_rad,
                 max_residual_px: 1.5,
                 min_support: 0,
             },
@@ -300,7 +310,7 @@ mod tests {
         let a = from_phi_theta(1.2, 0.4);
         let b = from_phi_theta(0.6, 2.0);
         let secs = [section_on(&a, 0.0, 40, 0), section_on(&b, 0.0, 20, 40)];
-        let mut m = Merger::new(MergeOptions::default(), 0.0016).unwrap();
+        let mut m = Merger::new(MergeParams::default(), 0.0016).unwrap();
         let mut rows = Vec::new();
         let r = m.merge(&secs, &mut rows).unwrap();
         assert_eq!((r.rows, r.dropped), (1, 1));
@@ -340,7 +350,7 @@ mod tests {
                 let n = (c * off.cos() + (u * dir.cos() + v * dir.sin()) * off.sin()).normalize();
                 section_on(&n, 0.0, 30, 30 * k as u32)
             }).collect();
-            let mut m = Merger::new(MergeOptions { max_angle_rad: Some(thr), max_residual_px: 1e6, min_support: 0 }, 0.0016).unwrap();
+            let mut m = Merger::new(MergeParams { max_angle_rad: thr, max_residual_px: 1e6, min_support: 0 }, 0.0016).unwrap();
             let mut rows = Vec::new();
             m.merge(&secs, &mut rows).unwrap();
             let a = m.assignment();

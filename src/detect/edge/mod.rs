@@ -6,6 +6,11 @@
 //! rows with their support ([`merge`]). [`EdgeDetector`] does the heavy setup once for a
 //! calibration and an image size; its `process` allocates nothing once warmed up.
 //!
+//! The configuration ([`EdgeOptions`], the `[detector.edge]` table) holds only the support a
+//! row needs. Every other parameter is fixed: [`EdgeParams`] gathers them, stage by stage,
+//! built from the options and the merge angle the calibration gives
+//! ([`EdgeParams::from_options`]).
+//!
 //! The edge method finds the two boundaries of a solid row (the paper's figures 6–7), so
 //! each crop row usually gives two rows here, both through the row's vanishing point.
 
@@ -14,10 +19,10 @@ pub mod chains;
 pub mod merge;
 pub mod split;
 
-pub use canny::{Canny, CannyOptions, CannyResult, ThresholdMode};
-pub use chains::{ChainOptions, ChainResult, ChainTracer, Chains};
-pub use merge::{MergeOptions, MergeResult, Merger};
-pub use split::{Section, SplitOptions, SplitResult, Splitter};
+pub use canny::{Canny, CannyParams, CannyResult, ThresholdMode};
+pub use chains::{ChainParams, ChainResult, ChainTracer, Chains};
+pub use merge::{MergeParams, MergeResult, Merger, REFERENCE_MAX_ANGLE_RAD};
+pub use split::{Section, SplitParams, SplitResult, Splitter};
 
 use crate::camera::Calibration;
 use crate::detect::Row;
@@ -36,8 +41,8 @@ pub enum EdgeError {
         expected: usize,
         actual: usize,
     },
-    /// An option is out of range, or stages disagree.
-    #[error("edge options: {0}")]
+    /// A parameter is out of range, or stages disagree.
+    #[error("edge parameters: {0}")]
     Options(String),
     /// The calibration does not fit the image.
     #[error("edge calibration: {0}")]
@@ -47,42 +52,69 @@ pub enum EdgeError {
     Format(PixelFormat),
 }
 
-/// Options of the whole edge method (the `[edge]` table of the configuration).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+/// The edge method's configuration (the `[detector.edge]` table).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct EdgeOptions {
-    pub canny: CannyOptions,
-    pub chains: ChainOptions,
-    pub split: SplitOptions,
-    pub merge: MergeOptions,
-    /// The mask is shrunk by this many pixels before use, so that its own boundary (the
-    /// rim of the lens's image circle, the robot's body) gives no edges. In pixels of the
-    /// working resolution (after `downsample`); at least the Gaussian's radius. Default 5.
-    pub mask_margin_px: u32,
-    /// The image is reduced by this factor (mean of factor×factor blocks) before Canny, and
-    /// the calibration rescaled with it (1 = full resolution). Pixel options (tolerances,
-    /// lengths, sigma) are in pixels of the reduced image. When the image size is not a
-    /// multiple of the factor, the last partial block of rows and columns is left out.
-    /// Default 1: the detector already works on a 2×2-binned image for large frames (a
-    /// GC2450C frame becomes 1224×1025).
-    pub downsample: u32,
+    /// Rows with fewer edge points are dropped (default 30); lower it for sparse plants or a
+    /// low resolution, where a row's boundary gives fewer points.
+    pub min_support: u32,
 }
 
 impl Default for EdgeOptions {
     fn default() -> Self {
         EdgeOptions {
-            canny: CannyOptions::default(),
-            chains: ChainOptions::default(),
-            split: SplitOptions::default(),
-            merge: MergeOptions::default(),
-            mask_margin_px: 5,
+            min_support: MergeParams::default().min_support,
+        }
+    }
+}
+
+/// Every parameter of the edge method, stage by stage (not configurable: the detector builds
+/// them with [`EdgeParams::from_options`]; tests and benchmarks set others to run the method
+/// on an unsmoothed full-resolution image).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EdgeParams {
+    pub canny: CannyParams,
+    pub chains: ChainParams,
+    pub split: SplitParams,
+    pub merge: MergeParams,
+    /// The image is reduced by this factor (mean of factor×factor blocks) before Canny, and
+    /// the calibration rescaled with it (1 = full resolution, the detector's: it hands over
+    /// its working image). Pixel parameters (tolerances, lengths, sigma, the mask's margin)
+    /// are in pixels of the reduced image. When the image size is not a multiple of the
+    /// factor, the last partial block of rows and columns is left out.
+    pub downsample: u32,
+}
+
+/// The mask is shrunk by this many pixels (of the working resolution) before use, so that its
+/// own boundary (the rim of the lens's image circle, the robot's body) gives no edges; at
+/// least the radius of the Gaussian Canny may smooth with.
+const MASK_MARGIN_PX: usize = 5;
+
+impl Default for EdgeParams {
+    fn default() -> Self {
+        EdgeParams {
+            canny: CannyParams::default(),
+            chains: ChainParams::default(),
+            split: SplitParams::default(),
+            merge: MergeParams::default(),
             downsample: 1,
         }
     }
 }
 
-impl EdgeOptions {
-    /// Checks every option (the same checks the stages make when they are built).
+impl EdgeParams {
+    /// The parameters the detector runs the method with: the configuration's `min_support`
+    /// and the merge angle `max_angle_rad` (radians; [`REFERENCE_MAX_ANGLE_RAD`] times the
+    /// calibration's angle factor, see [`crate::detect::scale`]), the rest fixed.
+    pub fn from_options(options: &EdgeOptions, max_angle_rad: f64) -> Self {
+        let mut p = EdgeParams::default();
+        p.merge.min_support = options.min_support;
+        p.merge.max_angle_rad = max_angle_rad;
+        p
+    }
+
+    /// Checks every parameter (the same checks the stages make when they are built).
     pub fn validate(&self) -> Result<(), EdgeError> {
         if !(1..=8).contains(&self.downsample) {
             return Err(EdgeError::Options(format!(
@@ -90,7 +122,7 @@ impl EdgeOptions {
                 self.downsample
             )));
         }
-        // A plausible angular pixel size; the stages only use it to read pixel options.
+        // A plausible angular pixel size; the stages only use it to read pixel parameters.
         let pixel = 1e-3;
         Canny::new(self.canny)?;
         ChainTracer::new(self.chains, 1, 1)?;
@@ -112,7 +144,7 @@ pub struct EdgeResult {
 /// The edge method for one calibration and image size.
 #[derive(Debug, Clone)]
 pub struct EdgeDetector {
-    options: EdgeOptions,
+    params: EdgeParams,
     /// The calibration at the working resolution.
     calibration: Calibration,
     /// Input image size.
@@ -143,15 +175,15 @@ pub struct EdgeDetector {
 impl EdgeDetector {
     /// Sets the method up for `width`×`height` images; the calibration is rescaled to that
     /// size when it is a uniform scaling of the calibration's own (and then to the working
-    /// resolution, see [`EdgeOptions::downsample`]).
+    /// resolution, see [`EdgeParams::downsample`]).
     pub fn new(
         calibration: &Calibration,
         width: usize,
         height: usize,
-        options: EdgeOptions,
+        params: EdgeParams,
     ) -> Result<Self, EdgeError> {
-        options.validate()?;
-        let factor = options.downsample as usize;
+        params.validate()?;
+        let factor = params.downsample as usize;
         let (ww, wh) = (width / factor, height / factor);
         if ww < 3 || wh < 3 {
             return Err(EdgeError::Options(format!(
@@ -166,11 +198,11 @@ impl EdgeDetector {
         let n = ww * wh;
         let reduced = if factor > 1 { n } else { 0 };
         Ok(EdgeDetector {
-            options,
-            canny: Canny::new(options.canny)?,
-            tracer: ChainTracer::new(options.chains, ww, wh)?,
-            splitter: Splitter::new(options.split, pixel_angle_rad)?,
-            merger: Merger::new(options.merge, pixel_angle_rad)?,
+            params,
+            canny: Canny::new(params.canny)?,
+            tracer: ChainTracer::new(params.chains, ww, wh)?,
+            splitter: Splitter::new(params.split, pixel_angle_rad)?,
+            merger: Merger::new(params.merge, pixel_angle_rad)?,
             calibration,
             width,
             height,
@@ -191,8 +223,8 @@ impl EdgeDetector {
         })
     }
 
-    pub fn options(&self) -> &EdgeOptions {
-        &self.options
+    pub fn params(&self) -> &EdgeParams {
+        &self.params
     }
 
     /// The calibration at the working resolution (chain pixels are in its pixels).
@@ -346,7 +378,7 @@ impl EdgeDetector {
             work,
             self.work_width,
             self.work_height,
-            self.options.mask_margin_px as usize,
+            MASK_MARGIN_PX,
             &mut self.erode_tmp,
             &mut self.erode_run,
             &mut self.mask_eroded,
@@ -577,8 +609,8 @@ mod tests {
             .collect();
         let img = render(&cal, &bounds);
         let mask = fov_mask(&cal);
-        let opts = EdgeOptions {
-            canny: CannyOptions {
+        let opts = EdgeParams {
+            canny: CannyParams {
                 sigma: 1.4,
                 ..Default::default()
             },
@@ -631,7 +663,7 @@ mod tests {
     #[test]
     fn wrong_sizes_and_formats_are_errors() {
         let cal = ideal_pal(100, 120).unwrap();
-        let mut det = EdgeDetector::new(&cal, 120, 100, EdgeOptions::default()).unwrap();
+        let mut det = EdgeDetector::new(&cal, 120, 100, EdgeParams::default()).unwrap();
         let img = vec![0u8; 120 * 100];
         let mut rows = Vec::new();
         let e = det.process(&img, &img[1..], &mut rows).unwrap_err();
@@ -642,8 +674,8 @@ mod tests {
             det.process_view(&view, &img, &mut rows),
             Err(EdgeError::Format(PixelFormat::Rgb8))
         ));
-        assert!(EdgeDetector::new(&cal, 100, 100, EdgeOptions::default()).is_err());
-        let halve = EdgeOptions {
+        assert!(EdgeDetector::new(&cal, 100, 100, EdgeParams::default()).is_err());
+        let halve = EdgeParams {
             downsample: 2,
             ..Default::default()
         };
@@ -658,7 +690,7 @@ mod tests {
             &cal,
             120,
             100,
-            EdgeOptions {
+            EdgeParams {
                 downsample: 0,
                 ..Default::default()
             },
@@ -683,12 +715,18 @@ mod tests {
     }
 
     #[test]
-    fn options_reject_unknown_keys() {
-        let o: EdgeOptions = toml::from_str("mask_margin_px = 2\n[canny]\nsigma = 1.0\n").unwrap();
-        assert_eq!(o.mask_margin_px, 2);
-        assert_eq!(o.canny.sigma, 1.0);
-        assert_eq!(o.split, SplitOptions::default());
-        let e = toml::from_str::<EdgeOptions>("[canny]\nsigmaa = 1.0\n").unwrap_err();
-        assert!(e.to_string().contains("sigmaa"), "{e}");
+    fn options_hold_only_the_support() {
+        let o: EdgeOptions = toml::from_str("min_support = 12\n").unwrap();
+        assert_eq!(o.min_support, 12);
+        let p = EdgeParams::from_options(&o, 0.004);
+        assert_eq!((p.merge.min_support, p.merge.max_angle_rad), (12, 0.004));
+        assert_eq!(
+            EdgeParams::from_options(&EdgeOptions::default(), REFERENCE_MAX_ANGLE_RAD),
+            EdgeParams::default()
+        );
+        for removed in ["mask_margin_px = 2\n", "[canny]\nsigma = 1.0\n"] {
+            let e = toml::from_str::<EdgeOptions>(removed).unwrap_err();
+            assert!(e.to_string().contains("unknown field"), "{e}");
+        }
     }
 }

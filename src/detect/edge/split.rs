@@ -12,12 +12,10 @@
 use super::EdgeError;
 use crate::sphere::Scatter;
 use nalgebra::Vector3;
-use serde::{Deserialize, Serialize};
 
-/// Options of the split stage.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct SplitOptions {
+/// Parameters of the split stage.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SplitParams {
     /// Largest distance of a ray from its section's great circle, in pixels (converted to an
     /// angle with the calibration's angular pixel size). Default 1.5.
     pub tolerance_px: f64,
@@ -25,9 +23,9 @@ pub struct SplitOptions {
     pub min_length: usize,
 }
 
-impl Default for SplitOptions {
+impl Default for SplitParams {
     fn default() -> Self {
-        SplitOptions {
+        SplitParams {
             tolerance_px: 1.5,
             min_length: 20,
         }
@@ -73,7 +71,7 @@ pub struct SplitResult {
 /// Splits chains into great-circle sections, reusing its work stack.
 #[derive(Debug, Clone)]
 pub struct Splitter {
-    options: SplitOptions,
+    params: SplitParams,
     tolerance_rad: f64,
     sin_tol: f64,
     stack: Vec<(u32, u32)>,
@@ -81,17 +79,17 @@ pub struct Splitter {
 
 impl Splitter {
     /// `pixel_angle_rad` is the angle one pixel subtends (to read `tolerance_px`).
-    pub fn new(options: SplitOptions, pixel_angle_rad: f64) -> Result<Self, EdgeError> {
-        if !(options.tolerance_px > 0.0 && options.tolerance_px.is_finite()) {
+    pub fn new(params: SplitParams, pixel_angle_rad: f64) -> Result<Self, EdgeError> {
+        if !(params.tolerance_px > 0.0 && params.tolerance_px.is_finite()) {
             return Err(EdgeError::Options(format!(
                 "split: tolerance_px = {} must be > 0",
-                options.tolerance_px
+                params.tolerance_px
             )));
         }
-        if options.min_length < 3 {
+        if params.min_length < 3 {
             return Err(EdgeError::Options(format!(
                 "split: min_length = {} must be at least 3",
-                options.min_length
+                params.min_length
             )));
         }
         if !(pixel_angle_rad > 0.0 && pixel_angle_rad < 0.5) {
@@ -99,17 +97,17 @@ impl Splitter {
                 "split: angular pixel size {pixel_angle_rad} rad is not plausible"
             )));
         }
-        let tolerance_rad = options.tolerance_px * pixel_angle_rad;
+        let tolerance_rad = params.tolerance_px * pixel_angle_rad;
         Ok(Splitter {
-            options,
+            params,
             tolerance_rad,
             sin_tol: tolerance_rad.sin(),
             stack: Vec::new(),
         })
     }
 
-    pub fn options(&self) -> &SplitOptions {
-        &self.options
+    pub fn params(&self) -> &SplitParams {
+        &self.params
     }
 
     /// The tolerance as an angle (radians).
@@ -127,7 +125,7 @@ impl Splitter {
     ) -> Result<SplitResult, EdgeError> {
         out.clear();
         let mut result = SplitResult::default();
-        let min_len = self.options.min_length as u32;
+        let min_len = self.params.min_length as u32;
         for (k, &(a, b)) in ranges.iter().enumerate() {
             if a > b || b as usize > rays.len() {
                 return Err(EdgeError::Options(format!(
@@ -289,7 +287,7 @@ mod tests {
     fn straight_chain_is_one_section() {
         let n = from_phi_theta(1.0, 2.0);
         let rays = arc(&n, 0.3, 0.002, 200);
-        let mut sp = Splitter::new(SplitOptions::default(), 0.0016).unwrap();
+        let mut sp = Splitter::new(SplitParams::default(), 0.0016).unwrap();
         let mut out = Vec::new();
         let r = sp.split(&rays, &[(0, 200)], &mut out).unwrap();
         assert_eq!(r.sections, 1);
@@ -301,12 +299,12 @@ mod tests {
     fn short_chains_dropped_and_bad_ranges_rejected() {
         let n = from_phi_theta(1.0, 2.0);
         let rays = arc(&n, 0.3, 0.002, 10);
-        let mut sp = Splitter::new(SplitOptions::default(), 0.0016).unwrap();
+        let mut sp = Splitter::new(SplitParams::default(), 0.0016).unwrap();
         let mut out = Vec::new();
         let r = sp.split(&rays, &[(0, 10)], &mut out).unwrap();
         assert_eq!((r.sections, r.dropped), (0, 1));
         assert!(sp.split(&rays, &[(0, 11)], &mut out).is_err());
-        assert!(Splitter::new(SplitOptions::default(), 0.0).is_err());
+        assert!(Splitter::new(SplitParams::default(), 0.0).is_err());
     }
 
     proptest! {
@@ -331,7 +329,7 @@ mod tests {
             }
             // A piece straddling a corner stays within the tolerance over up to about
             // 2·tolerance/sin(turn) rays (≈ 8 here); sections must be longer than that.
-            let mut sp = Splitter::new(SplitOptions { tolerance_px: 1.5, min_length: 16 }, dt).unwrap();
+            let mut sp = Splitter::new(SplitParams { tolerance_px: 1.5, min_length: 16 }, dt).unwrap();
             let mut out = Vec::new();
             sp.split(&pts, &[(0, pts.len() as u32)], &mut out).unwrap();
             prop_assert_eq!(out.len(), normals.len(), "sections {:?}", out.iter().map(|s| (s.start, s.end)).collect::<Vec<_>>());
