@@ -242,20 +242,11 @@ fn build_method(
             &opts.edge,
             angle_factor,
         )?),
-        Method::Pencil => {
-            let seed = opts
-                .pencil
-                .seed_with_combined
-                .then(|| CombinedMethod::new(&opts.combined, &opts.hough, &opts.edge, angle_factor))
-                .transpose()?;
-            Box::new(PencilMethod::new(
-                opts.pencil,
-                seed,
-                opts.max_tilt_deg,
-                &cal.mounting,
-                angle_factor,
-            )?)
-        }
+        Method::Pencil => Box::new(PencilMethod::new(
+            opts.pencil,
+            opts.max_tilt_deg,
+            &cal.mounting,
+        )?),
         Method::Strips => Box::new(StripsMethod::new(
             opts.strips,
             opts.max_tilt_deg,

@@ -24,208 +24,101 @@ use crate::sphere::Scatter;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
-/// Options of the pencil method. Lengths are pixels of the working image near the robot.
+/// `[detector.pencil]`: the pencil method's options. Lengths are pixels of the working
+/// image near the robot.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct PencilOptions {
-    /// Width of one bin of the profile across the rows.
-    pub bin_px: f64,
-    /// Half-width of the local mean that the profile's contrast is measured against (about
-    /// a row spacing: structure finer than this counts as rows).
-    pub reference_px: f64,
-    /// Step of the coarse grid of candidate vanishing points.
-    pub search_step_px: f64,
-    /// At most this many points take part in the search (an even stride through them).
-    pub search_points: usize,
     /// Largest heading of the rows from the robot's forward axis searched (degrees).
     pub max_heading_deg: f64,
-    /// Rows closer than this are one row.
-    pub min_separation_px: f64,
-    /// Smoothing of the profile before its peaks are read (Gaussian sigma).
-    pub smooth_px: f64,
-    /// A peak is a row when it stands this fraction above the profile's local mean.
-    pub min_prominence: f64,
-    /// A peak is a row only when its excess over the local mean is at least this fraction
-    /// of the strongest peak's.
-    pub min_peak_fraction: f64,
     /// At most this many rows are reported (strongest first).
     pub max_rows: usize,
-    /// Iterations of each row's refit on the points near it (see [`refine_row`]).
-    pub refine_iterations: usize,
-    /// Rows are taken within |tan ψ| ≤ this (lateral offset over camera height).
-    pub max_tan: f64,
-    /// Candidate vanishing points refined and checked: the grid's strongest local maxima,
-    /// and the seeds (the combined method's, `seed_with_combined`) whatever their contrast.
-    /// Default 1: the candidates are ranked by contrast times the rows' agreement on their
-    /// vanishing point, which on real images picks a wrong local maximum more often the more
-    /// there are (docs/real.md).
-    pub candidates: usize,
-    /// The contrast is multiplied by (weight of the points the profile holds / weight of
-    /// all points) to this power. Points beyond the vanishing point (above the horizon it
-    /// implies) fall out of the profile; without the penalty, a candidate below the true
-    /// vanishing point drops the far field, where the rows merge, and looks sharper.
-    pub coverage_power: f64,
-    /// Refit the rows found on the image's pixels near each (the Hough method's refit), and
-    /// the vanishing point on them (see `Detector`'s pencil path).
-    pub polish: bool,
-    /// The polish's band around a row is a quarter of the angle to its nearest neighbour
-    /// (around the vanishing point), at most this (degrees). Default (absent): from the
-    /// calibration's field of view (3° at the GC2450C's; [`super::scale`]).
-    pub polish_max_band_deg: Option<f64>,
-    /// Fit the rows' comb (equal spacing in tan ψ, [`super::comb`]) to the profile: peaks
-    /// off the comb are not rows, and an empty tooth between rows gets the weak peak there.
-    pub comb: bool,
-    /// The comb is used only when its contrast is at least this.
-    pub comb_min_contrast: f64,
+    /// Rows closer than this are one row: about the narrowest row spacing in the image.
+    pub min_separation_px: f64,
     /// Longest row spacing the comb searches (pixels across the rows near the robot).
     pub comb_max_period_px: f64,
-    /// A weak peak on an empty tooth is a row when it stands this fraction above the
-    /// profile's local mean (the strong peaks need `min_prominence`).
-    pub comb_weak_prominence: f64,
-    /// The comb is searched at reference angles (around the vanishing point) within ± this
-    /// of the assumed ground normal's (degrees): a roll about the rows, or a wrong focal
-    /// length, bends the comb in tan ψ ([`super::comb::TanAxis`]).
-    pub comb_max_roll_deg: f64,
-    /// Candidate vanishing points are ranked by their contrast times the comb's contrast
-    /// (floored at 0.05) to this power: the right point gives evenly spaced rows.
-    pub comb_power: f64,
-    /// Also weigh the combined method's vanishing point (Hough and edge rows, found on the
-    /// same points first) as a candidate. It costs the combined method's time and is the
-    /// better candidate on many real images, where the profile alone is sharpest along a
-    /// shadow or the far field (docs/real.md). Default true.
-    pub seed_with_combined: bool,
 }
 
-/// Step of the comb's reference angles (degrees), before two halvings around the best.
-const COMB_ROLL_STEP_DEG: f64 = 2.0;
-
-/// Checks that the pencil option `name` is within `lo..=hi` (a NaN is not).
-fn within(name: &str, value: f64, lo: f64, hi: f64) -> Result<(), DetectError> {
-    if (lo..=hi).contains(&value) {
-        Ok(())
-    } else {
-        Err(DetectError::Options(format!(
-            "pencil.{name} = {value} must be within {lo}..={hi}"
-        )))
+impl Default for PencilOptions {
+    fn default() -> Self {
+        PencilOptions {
+            max_heading_deg: 45.0,
+            max_rows: 12,
+            min_separation_px: 24.0,
+            comb_max_period_px: 400.0,
+        }
     }
 }
+
+/// Width of one bin of the profile across the rows (pixels).
+const BIN_PX: f64 = 3.0;
+/// Half-width of the local mean that the profile's contrast is measured against (about a
+/// row spacing: structure finer than this counts as rows; pixels).
+const REFERENCE_PX: f64 = 100.0;
+/// Step of the coarse grid of candidate vanishing points (pixels).
+const SEARCH_STEP_PX: f64 = 14.0;
+/// At most this many points take part in the search (an even stride through them).
+const SEARCH_POINTS: usize = 2000;
+/// Smoothing of the profile before its peaks are read (Gaussian sigma, pixels).
+const SMOOTH_PX: f64 = 6.0;
+/// A peak is a row when it stands this fraction above the profile's local mean.
+const MIN_PROMINENCE: f64 = 0.3;
+/// A peak is a row only when its excess over the local mean is at least this fraction of
+/// the strongest peak's.
+const MIN_PEAK_FRACTION: f64 = 0.1;
+/// Iterations of each row's refit on the points near it (see [`refine_row`]).
+const REFINE_ITERATIONS: usize = 3;
+/// Rows are taken within |tan ψ| ≤ this (lateral offset over camera height).
+const MAX_TAN: f64 = 4.0;
+/// The comb (equal spacing in tan ψ, [`super::comb`]) is used for the rows only when its
+/// contrast is at least this: then peaks off it are not rows, and an empty tooth between
+/// rows gets the weak peak there.
+const COMB_MIN_CONTRAST: f64 = 0.25;
+/// A weak peak on an empty tooth is a row when it stands this fraction above the profile's
+/// local mean (the strong peaks need `MIN_PROMINENCE`).
+const COMB_WEAK_PROMINENCE: f64 = 0.1;
+/// The comb is searched at reference angles (around the vanishing point) within ± this of
+/// the assumed ground normal's (degrees): a roll about the rows, or a wrong focal length,
+/// bends the comb in tan ψ ([`super::comb::TanAxis`]).
+const COMB_MAX_ROLL_DEG: f64 = 20.0;
+/// Step of the comb's reference angles (degrees), before two halvings around the best.
+const COMB_ROLL_STEP_DEG: f64 = 2.0;
 
 /// The comb's search on a profile whose rows are at least `sep` bins apart: periods from
 /// `sep` to `comb_max_period_px`, a peak on a tooth within half of `sep`.
 fn comb_search(sep: usize, opts: &PencilOptions) -> CombSearch {
     CombSearch {
         min_period: sep as f64,
-        max_period: opts.comb_max_period_px / opts.bin_px,
+        max_period: opts.comb_max_period_px / BIN_PX,
         tolerance: (0.5 * sep as f64).max(1.0),
         ..CombSearch::default()
     }
 }
 
-/// The polish's widest band (degrees) at the reference angular resolution.
-pub const REFERENCE_POLISH_MAX_BAND_DEG: f64 = 3.0;
-
-impl Default for PencilOptions {
-    fn default() -> Self {
-        PencilOptions {
-            bin_px: 3.0,
-            reference_px: 100.0,
-            search_step_px: 14.0,
-            search_points: 2000,
-            max_heading_deg: 45.0,
-            min_separation_px: 24.0,
-            smooth_px: 6.0,
-            min_prominence: 0.3,
-            min_peak_fraction: 0.1,
-            max_rows: 12,
-            refine_iterations: 3,
-            max_tan: 4.0,
-            candidates: 1,
-            coverage_power: 1.0,
-            polish: true,
-            polish_max_band_deg: None,
-            comb: true,
-            comb_min_contrast: 0.25,
-            comb_max_period_px: 400.0,
-            comb_weak_prominence: 0.1,
-            comb_max_roll_deg: 20.0,
-            comb_power: 0.0,
-            seed_with_combined: true,
-        }
-    }
-}
-
 impl PencilOptions {
-    /// The polish's widest band (degrees) in force (the option, else the reference value).
-    pub fn polish_max_band_deg(&self) -> f64 {
-        self.polish_max_band_deg
-            .unwrap_or(REFERENCE_POLISH_MAX_BAND_DEG)
-    }
-
     pub fn validate(&self) -> Result<(), DetectError> {
-        let positive = [
-            ("bin_px", self.bin_px),
-            ("reference_px", self.reference_px),
-            ("search_step_px", self.search_step_px),
-            ("min_separation_px", self.min_separation_px),
-            ("smooth_px", self.smooth_px),
-            ("max_tan", self.max_tan),
-            ("comb_max_period_px", self.comb_max_period_px),
-        ];
-        for (name, v) in positive {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(DetectError::Options(format!(
-                    "pencil.{name} = {v} must be a positive number"
-                )));
-            }
-        }
-        within("bin_px", self.bin_px, 0.25, 1000.0)?;
-        within("search_step_px", self.search_step_px, 1.0, 1000.0)?;
-        if self.refine_iterations > 64 {
-            return Err(DetectError::Options(format!(
-                "pencil.refine_iterations = {} must be within 0..=64",
-                self.refine_iterations
-            )));
-        }
-        if self.reference_px < 2.0 * self.bin_px {
-            return Err(DetectError::Options(format!(
-                "pencil.reference_px = {} must be at least twice pencil.bin_px = {}",
-                self.reference_px, self.bin_px
-            )));
-        }
-        let b = self.polish_max_band_deg();
-        if !(b > 0.0 && b <= 30.0) {
-            return Err(DetectError::Options(format!(
-                "pencil.polish_max_band_deg = {b} must be within (0, 30]"
-            )));
-        }
-        within("comb_min_contrast", self.comb_min_contrast, -1.0, 1.0)?;
-        if !(self.comb_weak_prominence >= 0.0 && self.comb_weak_prominence.is_finite()) {
-            return Err(DetectError::Options(format!(
-                "pencil.comb_weak_prominence = {} must be >= 0",
-                self.comb_weak_prominence
-            )));
-        }
-        within("comb_max_roll_deg", self.comb_max_roll_deg, 0.0, 60.0)?;
-        within("comb_power", self.comb_power, 0.0, 10.0)?;
-        within("coverage_power", self.coverage_power, 0.0, 10.0)?;
+        let bad = |m: String| Err(DetectError::Options(m));
         if !(self.max_heading_deg > 0.0 && self.max_heading_deg <= 90.0) {
-            return Err(DetectError::Options(format!(
+            return bad(format!(
                 "pencil.max_heading_deg = {} must be within (0, 90]",
                 self.max_heading_deg
-            )));
+            ));
         }
-        within("min_peak_fraction", self.min_peak_fraction, 0.0, 1.0)?;
-        if !(self.min_prominence >= 0.0 && self.min_prominence.is_finite()) {
-            return Err(DetectError::Options(format!(
-                "pencil.min_prominence = {} must be >= 0",
-                self.min_prominence
-            )));
+        if !(1..=256).contains(&self.max_rows) {
+            return bad(format!(
+                "pencil.max_rows = {} must be within 1..=256",
+                self.max_rows
+            ));
         }
-        if self.search_points < 16 || self.max_rows == 0 || self.max_rows > 256 {
-            return Err(DetectError::Options(format!(
-                "pencil.search_points = {} must be >= 16 and pencil.max_rows = {} within 1..=256",
-                self.search_points, self.max_rows
-            )));
+        for (name, v) in [
+            ("min_separation_px", self.min_separation_px),
+            ("comb_max_period_px", self.comb_max_period_px),
+        ] {
+            if !(v.is_finite() && v >= BIN_PX && v <= 10_000.0) {
+                return bad(format!(
+                    "pencil.{name} = {v} must be within {BIN_PX}..=10000"
+                ));
+            }
         }
         Ok(())
     }
@@ -271,7 +164,6 @@ pub struct PencilRows {
     sc: PencilScales,
     grid: Vec<(f64, f64, f64)>,
     starts: Vec<(f64, f64, f64)>,
-    cands: Vec<Candidate>,
     evaluated: usize,
     /// The share of the points' weight the last histogram held.
     coverage: f64,
@@ -326,7 +218,6 @@ impl PencilRows {
             sc: PencilScales::default(),
             grid: Vec::new(),
             starts: Vec::new(),
-            cands: Vec::with_capacity(16),
             evaluated: 0,
             coverage: 0.0,
             comb: None,
@@ -394,7 +285,7 @@ impl PencilRows {
         let Some((e1, e2)) = pencil_frame(v, &-self.axes.up) else {
             return false;
         };
-        let m = self.opts.max_tan;
+        let m = MAX_TAN;
         let nb = ((2.0 * m / bw).ceil() as usize).max(1);
         self.hist.clear();
         self.hist.resize(nb, 0.0);
@@ -450,7 +341,7 @@ impl PencilRows {
     }
 
     /// The image's scales from its points (unit rays and the angular size of each ray's
-    /// pixel); call before [`Self::candidates`] and [`Self::read_rows`] for each image.
+    /// pixel); call before [`Self::candidate`] and [`Self::read_rows`] for each image.
     pub fn prepare(
         &mut self,
         rays: &[[f32; 3]],
@@ -469,24 +360,16 @@ impl PencilRows {
         Ok(self.sc)
     }
 
-    /// Candidate vanishing points, best first: the local maxima of the profile's contrast on
-    /// the coarse grid (and the `seeds`, e.g. another method's vanishing point), at most
-    /// `candidates` of them, each refined by halving steps. Empty when the image has too few
-    /// points or no scale.
-    pub fn candidates(
-        &mut self,
-        rays: &[[f32; 3]],
-        weights: &[f32],
-        seeds: &[Vector3<f64>],
-        out: &mut Vec<Candidate>,
-    ) -> usize {
-        out.clear();
+    /// The vanishing point that makes the profile sharpest: the strongest local maximum of
+    /// the profile's contrast on the coarse grid, refined by halving steps. `None` when the
+    /// image has too few points or no scale.
+    pub fn candidate(&mut self, rays: &[[f32; 3]], weights: &[f32]) -> Option<Candidate> {
         let sc = self.sc;
         if rays.len() < 16 || sc.pixels_per_rad <= 0.0 || sc.tan_per_px <= 0.0 {
-            return 0;
+            return None;
         }
-        let stride = rays.len().div_ceil(self.opts.search_points).max(1);
-        let step0 = self.opts.search_step_px / sc.pixels_per_rad;
+        let stride = rays.len().div_ceil(SEARCH_POINTS).max(1);
+        let step0 = SEARCH_STEP_PX / sc.pixels_per_rad;
         let az_max = self.opts.max_heading_deg.to_radians();
         let n_az = (az_max / step0).ceil() as i64;
         let n_el = (self.max_tilt / step0).ceil() as i64;
@@ -502,7 +385,7 @@ impl PencilRows {
                 evaluated += 1;
             }
         }
-        // Local maxima of the grid (8 neighbours), then the seeds.
+        // Local maxima of the grid (8 neighbours).
         self.starts.clear();
         for a in 0..w_az {
             for e in 0..w_el {
@@ -531,31 +414,16 @@ impl PencilRows {
         }
         self.grid = grid;
         self.starts.sort_unstable_by(|a, b| b.0.total_cmp(&a.0));
-        self.starts.truncate(self.opts.candidates.max(1));
-        // the seeds are candidates whatever their contrast
-        for s in seeds {
-            let (az, el) = self.az_el(s);
-            if az.abs() <= az_max && el.abs() <= self.max_tilt {
-                let c = self.score(az, el, rays, weights, stride);
-                self.starts.push((c, az, el));
-                evaluated += 1;
-            }
-        }
-        for k in 0..self.starts.len() {
-            let (c, az, el) = self.starts[k];
-            let (c, az, el, n) = self.climb(c, az, el, step0, rays, weights, stride);
-            evaluated += n;
-            out.push(Candidate {
-                direction: self.direction(az, el),
-                contrast: c,
-            });
-        }
-        out.sort_unstable_by(|a, b| b.contrast.total_cmp(&a.contrast));
-        self.evaluated = evaluated;
-        out.len()
+        let &(c, az, el) = self.starts.first()?;
+        let (c, az, el, n) = self.climb(c, az, el, step0, rays, weights, stride);
+        self.evaluated = evaluated + n;
+        Some(Candidate {
+            direction: self.direction(az, el),
+            contrast: c,
+        })
     }
 
-    /// Scores evaluated by the last [`Self::candidates`].
+    /// Scores evaluated by the last [`Self::candidate`].
     pub fn evaluated(&self) -> usize {
         self.evaluated
     }
@@ -569,13 +437,13 @@ impl PencilRows {
         weights: &[f32],
         stride: usize,
     ) -> f64 {
-        let bw = self.opts.bin_px * self.sc.tan_per_px;
-        let half = (self.opts.reference_px / self.opts.bin_px).round().max(1.0) as usize;
+        let bw = BIN_PX * self.sc.tan_per_px;
+        let half = (REFERENCE_PX / BIN_PX).round().max(1.0) as usize;
         let v = self.direction(az, el);
         if !self.histogram(&v, rays, weights, stride, bw) {
             return -1.0;
         }
-        self.contrast(half) * self.coverage.powf(self.opts.coverage_power)
+        self.contrast(half) * self.coverage
     }
 
     /// Halving steps from (az, el) while the contrast grows; returns the best and the
@@ -616,39 +484,28 @@ impl PencilRows {
         (c0, az0, el0, n)
     }
 
-    /// The best candidate and its rows in one call: [`Self::prepare`], [`Self::candidates`],
-    /// then [`Self::read_rows`] on the candidate of highest contrast.
+    /// The sharpest vanishing point and its rows: [`Self::prepare`], [`Self::candidate`],
+    /// then [`Self::read_rows`] there.
     pub fn find(
         &mut self,
         rays: &[[f32; 3]],
         weights: &[f32],
         pixel_rad: &[f32],
-        seeds: &[Vector3<f64>],
         rows: &mut Vec<Row>,
     ) -> Result<PencilResult, DetectError> {
         let scales = self.prepare(rays, weights, pixel_rad)?;
-        let mut cands = std::mem::take(&mut self.cands);
-        self.candidates(rays, weights, seeds, &mut cands);
+        let best = self.candidate(rays, weights);
         let mut res = PencilResult {
             scales,
             evaluated: self.evaluated,
             ..PencilResult::default()
         };
-        if let Some(c) = cands.first().copied() {
+        if let Some(c) = best {
             res.direction = Some(c.direction);
             res.contrast = c.contrast;
             res.rows = self.read_rows(&c.direction, rays, weights, rows);
         }
-        self.cands = cands;
         Ok(res)
-    }
-
-    /// Azimuth and elevation of a direction (either sign: the one pointing forward).
-    fn az_el(&self, v: &Vector3<f64>) -> (f64, f64) {
-        let v = if v.dot(&self.axes.fwd) < 0.0 { -v } else { *v };
-        let el = v.dot(&self.axes.up).clamp(-1.0, 1.0).asin();
-        let az = v.dot(&self.axes.left).atan2(v.dot(&self.axes.fwd));
-        (az, el)
     }
 
     /// The comb fitted by the last [`Self::read_rows`] (used for the rows only when its
@@ -660,9 +517,6 @@ impl PencilRows {
     /// The comb of the smoothed profile (periods from `sep` bins to
     /// `comb_max_period_px`), when enabled.
     fn fit_comb(&mut self, sep: usize, axis: &TanAxis) -> Option<RolledComb> {
-        if !self.opts.comb {
-            return None;
-        }
         let search = comb_search(sep, &self.opts);
         self.comb_peaks.clear();
         self.comb_peaks
@@ -671,7 +525,7 @@ impl PencilRows {
             &self.comb_peaks,
             axis,
             &search,
-            self.opts.comb_max_roll_deg.to_radians(),
+            COMB_MAX_ROLL_DEG.to_radians(),
             COMB_ROLL_STEP_DEG.to_radians(),
             &mut self.rolled,
         )
@@ -725,7 +579,7 @@ impl PencilRows {
             let a = i.saturating_sub(wide);
             let b = (i + wide + 1).min(nb);
             let mean = (self.prefix[b] - self.prefix[a]) / (b - a) as f64;
-            if self.smooth[i] > mean * (1.0 + self.opts.comb_weak_prominence) {
+            if self.smooth[i] > mean * (1.0 + COMB_WEAK_PROMINENCE) {
                 taken.push((k, i));
             }
         }
@@ -743,16 +597,16 @@ impl PencilRows {
         weights: &[f32],
         rows: &mut Vec<Row>,
     ) -> usize {
-        let bw = self.opts.bin_px * self.sc.tan_per_px;
+        let bw = BIN_PX * self.sc.tan_per_px;
         if bw <= 0.0 {
             return 0;
         }
         if !self.histogram(v, rays, weights, 1, bw) {
             return 0;
         }
-        let sigma = self.opts.smooth_px / self.opts.bin_px;
+        let sigma = SMOOTH_PX / BIN_PX;
         gaussian_1d(&self.hist, sigma, &mut self.kernel, &mut self.smooth);
-        let sep = (self.opts.min_separation_px / self.opts.bin_px)
+        let sep = (self.opts.min_separation_px / BIN_PX)
             .round()
             .max(1.0) as usize;
         let nb = self.smooth.len();
@@ -774,17 +628,17 @@ impl PencilRows {
             let lo = i.saturating_sub(wide);
             let hi = (i + wide + 1).min(nb);
             let mean = (self.prefix[hi] - self.prefix[lo]) / (hi - lo) as f64;
-            if x > mean * (1.0 + self.opts.min_prominence) && x > 0.0 {
+            if x > mean * (1.0 + MIN_PROMINENCE) && x > 0.0 {
                 self.peaks.push((x - mean, i));
             }
         }
         self.peaks
             .sort_unstable_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
-        let floor = self.peaks.first().map_or(0.0, |p| p.0) * self.opts.min_peak_fraction;
+        let floor = self.peaks.first().map_or(0.0, |p| p.0) * MIN_PEAK_FRACTION;
         self.peaks.retain(|p| p.0 >= floor);
         self.sel.clear();
         let axis = TanAxis {
-            start: -self.opts.max_tan,
+            start: -MAX_TAN,
             bin: bw,
         };
         self.comb = self.fit_comb(sep, &axis);
@@ -795,7 +649,7 @@ impl PencilRows {
         );
         match self
             .comb
-            .filter(|c| c.comb.contrast >= self.opts.comb_min_contrast)
+            .filter(|c| c.comb.contrast >= COMB_MIN_CONTRAST)
         {
             Some(comb) => self.select_on_comb(&comb, &axis, sep, wide),
             None => {
@@ -812,7 +666,7 @@ impl PencilRows {
         let Some((e1, e2)) = pencil_frame(v, &-self.axes.up) else {
             return 0;
         };
-        let m = self.opts.max_tan;
+        let m = MAX_TAN;
         let start = rows.len();
         for k in 0..self.sel.len() {
             let i = self.sel[k];
@@ -830,7 +684,7 @@ impl PencilRows {
             let n = v.cross(&d).normalize();
             // The peak's half-width as an angle around v (tan ψ changes by bw per bin).
             let band = 0.5 * sep as f64 * bw / (1.0 + t * t);
-            let (n, support) = refine_row(&n, v, rays, weights, band, self.opts.refine_iterations);
+            let (n, support) = refine_row(&n, v, rays, weights, band, REFINE_ITERATIONS);
             rows.push(Row {
                 normal: crate::sphere::canonical(&n),
                 method: Method::Pencil,
@@ -992,7 +846,7 @@ mod tests {
         let w = vec![1.0f32; rays.len()];
         let px = vec![1.0f32 / 300.0; rays.len()];
         let mut rows = Vec::new();
-        let r = p.find(rays, &w, &px, &[], &mut rows).unwrap();
+        let r = p.find(rays, &w, &px, &mut rows).unwrap();
         (r, rows)
     }
 
@@ -1038,38 +892,35 @@ mod tests {
 
     #[test]
     fn bad_options_are_named() {
-        let o = PencilOptions {
-            bin_px: 0.0,
-            ..PencilOptions::default()
-        };
-        let e = PencilRows::new(o, 15.0, &Mounting::default()).unwrap_err();
-        assert!(e.to_string().contains("pencil.bin_px"), "{e}");
-        let o = PencilOptions {
-            reference_px: 4.0,
-            ..PencilOptions::default()
-        };
-        assert!(PencilRows::new(o, 15.0, &Mounting::default()).is_err());
-        let o = PencilOptions {
-            refine_iterations: 1_000_000_000,
-            ..PencilOptions::default()
-        };
-        let e = PencilRows::new(o, 15.0, &Mounting::default()).unwrap_err();
-        assert!(e.to_string().contains("pencil.refine_iterations"), "{e}");
-        // a grid or histogram step too fine to finish is refused by name
         for (o, key) in [
             (
                 PencilOptions {
-                    search_step_px: 1e-6,
+                    max_heading_deg: 0.0,
                     ..PencilOptions::default()
                 },
-                "pencil.search_step_px",
+                "pencil.max_heading_deg",
             ),
             (
                 PencilOptions {
-                    bin_px: 1e-6,
+                    max_rows: 0,
                     ..PencilOptions::default()
                 },
-                "pencil.bin_px",
+                "pencil.max_rows",
+            ),
+            // a separation too fine to finish is refused by name
+            (
+                PencilOptions {
+                    min_separation_px: 1e-6,
+                    ..PencilOptions::default()
+                },
+                "pencil.min_separation_px",
+            ),
+            (
+                PencilOptions {
+                    comb_max_period_px: f64::NAN,
+                    ..PencilOptions::default()
+                },
+                "pencil.comb_max_period_px",
             ),
         ] {
             let e = PencilRows::new(o, 15.0, &Mounting::default()).unwrap_err();
@@ -1082,7 +933,7 @@ mod tests {
         let mut p = PencilRows::new(PencilOptions::default(), 15.0, &Mounting::default()).unwrap();
         let mut rows = Vec::new();
         assert!(p
-            .find(&[[0.0, 0.0, -1.0]], &[], &[1.0], &[], &mut rows)
+            .find(&[[0.0, 0.0, -1.0]], &[], &[1.0], &mut rows)
             .is_err());
     }
 }
