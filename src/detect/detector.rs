@@ -22,7 +22,7 @@ use super::pose::heading_tilt;
 use super::prior::DetectorPrior;
 use super::refit::{refit_rows, Candidates, RefitImage, RowFits, Tiles};
 use super::smooth::Gaussian;
-use super::strips::{StripsResult, StripsRows};
+use super::strips::{StripsResult, StripsRows, REFERENCE_POLISH_MAX_BAND_DEG};
 use super::threshold::{keep_brightest, ThresholdResult};
 use super::vanishing::{refit_direction, VanishingFinder, VanishingResult};
 use super::vegetation::{vegetation_image, working_factor};
@@ -506,6 +506,8 @@ pub struct Detector {
     /// The strips method, built only when it is the method (it needs a forward-looking
     /// camera).
     strips: Option<StripsRows>,
+    /// The strips polish's widest band (degrees): the reference times the angle factor.
+    strips_polish_band_deg: f64,
     vanish: VanishingStage,
     points: Points,
     /// The edge method, set up for the working image size (built at the first image and
@@ -548,7 +550,7 @@ impl Detector {
     /// option left absent is derived from the calibration's field of view
     /// ([`super::scale::resolve`]); [`Detector::options`] gives the values in force.
     pub fn new(cal: &Calibration, opts: DetectorOptions) -> Result<Self, DetectError> {
-        let opts = super::scale::resolve(cal, &opts)?.0;
+        let (opts, scales) = super::scale::resolve(cal, &opts)?;
         let w = opts.combined.edge_weight;
         if !(w > 0.0 && w < 1.0) {
             return Err(DetectError::Options(format!(
@@ -580,6 +582,7 @@ impl Detector {
         };
         Ok(Detector {
             strips,
+            strips_polish_band_deg: REFERENCE_POLISH_MAX_BAND_DEG * scales.factor,
             prep: Preparer::new(cal, &opts)?,
             hough: HoughRows::new(opts.hough)?,
             pencil: PencilRows::new(opts.pencil, opts.max_tilt_deg, &cal.mounting)?,
@@ -1179,7 +1182,7 @@ impl Detector {
     }
 
     /// The strips method ([`super::strips`]): its rows through its vanishing point, then
-    /// the vanishing stage on those rows (and the polish, when `strips.polish`).
+    /// the vanishing stage on those rows and the polish.
     fn run_strips(&mut self, out: &mut Detection) -> Result<(), DetectError> {
         out.rows.clear();
         let Some(strips) = self.strips.as_mut() else {
@@ -1190,10 +1193,7 @@ impl Detector {
         let p = &self.points;
         let vp = strips.find(&p.rays, &p.weights, &p.pixel_rad, &mut out.rows)?;
         self.vanish.run(None, out)?;
-        if self.opts.strips.polish {
-            let band = self.opts.strips.polish_max_band_deg();
-            self.polish_pencil_rows(out, band)?;
-        }
+        self.polish_pencil_rows(out, self.strips_polish_band_deg)?;
         // The rows meet in the strips' vanishing point by construction; where the
         // vanishing stage finds none among them (one or two rows), that point is the answer.
         if let (None, Some(v), false) = (out.vanishing_point, vp, out.rows.is_empty()) {

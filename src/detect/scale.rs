@@ -185,9 +185,11 @@ pub fn resolve(
     }
     if o.method == Method::Strips {
         let pixels = resolution.width as f64 * resolution.height as f64;
-        let share = ((o.strips.kept_share * pixels).round() as usize).max(1);
+        let share = ((super::strips::KEPT_SHARE * pixels).round() as usize).max(1);
         o.threshold.target_points.get_or_insert(share);
-        o.threshold.min_level.get_or_insert(o.strips.kept_min_level);
+        o.threshold
+            .min_level
+            .get_or_insert(super::strips::KEPT_MIN_LEVEL);
     }
     let h = &mut o.hough;
     h.phi_bins.get_or_insert(bins(REFERENCE_BINS));
@@ -209,9 +211,6 @@ pub fn resolve(
     o.pencil
         .polish_max_band_deg
         .get_or_insert(angle(super::pencil::REFERENCE_POLISH_MAX_BAND_DEG));
-    o.strips
-        .polish_max_band_deg
-        .get_or_insert(angle(super::strips::REFERENCE_POLISH_MAX_BAND_DEG));
     o.edge
         .merge
         .max_angle_rad
@@ -301,10 +300,6 @@ pub fn scales_report(cal: &Calibration, opts: &DetectorOptions) -> Result<String
         ("combined.pair_max_deg", opts.combined.pair_max_deg()),
         ("pencil.polish_max_band_deg", pe.polish_max_band_deg()),
         (
-            "strips.polish_max_band_deg",
-            opts.strips.polish_max_band_deg(),
-        ),
-        (
             "edge.merge.max_angle_rad",
             opts.edge.merge.max_angle_rad().to_degrees(),
         ),
@@ -325,11 +320,6 @@ pub fn scales_report(cal: &Calibration, opts: &DetectorOptions) -> Result<String
         ("pencil.search_step_px", pe.search_step_px),
         ("pencil.min_separation_px", pe.min_separation_px),
         ("pencil.smooth_px", pe.smooth_px),
-        ("strips.strip_px", opts.strips.strip_px),
-        ("strips.smooth_px", opts.strips.smooth_px),
-        ("strips.peak_sigma_px", opts.strips.peak_sigma_px),
-        ("strips.search_step_px", opts.strips.search_step_px),
-        ("strips.min_depth_px", opts.strips.min_depth_px),
     ] {
         line(format!("  {name:<28} {l:>7.2} px = {:>7.3} deg", deg(l)));
     }
@@ -422,14 +412,17 @@ mod tests {
         let cal = Calibration::parse_toml(text, std::path::Path::new("p.toml")).unwrap();
         let (o, _) = resolve(&cal, &DetectorOptions::default()).unwrap();
         assert_eq!(o.method, Method::Strips);
-        let share = o.strips.kept_share;
+        let share = super::super::strips::KEPT_SHARE;
         assert_eq!(
             o.threshold.target_points,
             Some((share * 640.0 * 480.0).round() as usize)
         );
-        assert_eq!(o.threshold.min_level, Some(o.strips.kept_min_level));
+        assert_eq!(
+            o.threshold.min_level,
+            Some(super::super::strips::KEPT_MIN_LEVEL)
+        );
         assert_ne!(
-            o.strips.kept_min_level,
+            super::super::strips::KEPT_MIN_LEVEL,
             super::super::threshold::DEFAULT_MIN_LEVEL
         );
         // an explicit target, or another method, keeps its own
