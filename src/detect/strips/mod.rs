@@ -4,26 +4,26 @@
 //! fitted its own line.
 //!
 //! The method owns, one file each:
-//! - the virtual image ([`virtual_image`]): the camera's own perspective image (an ideal
+//! - the virtual image (`virtual_image.rs`): the camera's own perspective image (an ideal
 //!   pinhole on the optical axis at the calibration's angular resolution there), turned so that
 //!   its strips run along the horizon that the mounting implies. Every length is in its pixels,
 //!   so the same scene through any focal length gives the same rows;
-//! - the strips' peaks ([`peaks`]): each strip's vegetation profile across the image,
+//! - the strips' peaks (`peaks.rs`): each strip's vegetation profile across the image,
 //!   smoothed; its peaks, by their prominence, are where crop rows cross the strip;
-//! - the agreement ([`agreement`]): seen from a candidate vanishing point (a_v, p_v) — along
+//! - the agreement (`agreement.rs`): seen from a candidate vanishing point (a_v, p_v) — along
 //!   and below the horizon — a peak at (a, p) lies at u = (a − a_v)/(p − p_v) in the pencil of
 //!   lines through it. For crop rows on flat ground u is proportional to the row's lateral
 //!   position over the camera's height, so at the rows' vanishing point the peaks of one row
 //!   share one u in every strip. The agreement is a kernel sum over the pairs of peaks from
 //!   different strips, each peak's width in u its pixel uncertainty over its depth;
-//! - the search ([`search`]): the vanishing point of the highest agreement within the
+//! - the search (`search.rs`): the vanishing point of the highest agreement within the
 //!   heading and tilt limits (or a prior's window), a coarse grid climbed to 1 px, a near tie
 //!   between nearby summits broken by the comb's strength;
-//! - the comb ([`comb`], [`fourier`]): the period and phase of the peaks' u (their strongest
+//! - the comb (`comb.rs`, `fourier.rs`): the period and phase of the peaks' u (their strongest
 //!   Fourier component), read on the peaks again with each strip straightened about the
 //!   vanishing point. Each tooth with peaks in enough strips is a row, placed at the centre of
 //!   its own peaks; peaks between the teeth (weeds, plant edges, shadows) are not rows;
-//! - each row's own line ([`own_line`]): fitted to the straightened peaks on its tooth and
+//! - each row's own line (`own_line.rs`): fitted to the straightened peaks on its tooth and
 //!   anchored at the vanishing point, since real rows do not all meet in one point.
 //!
 //! The detector then polishes the rows on the image's pixels within a band
