@@ -249,15 +249,11 @@ fn bad_labels_are_outcomes_with_errors_not_a_failed_run() {
     assert_eq!(stderr.matches("cannot list").count(), 1, "{stderr}");
     // An option out of range stops it with the option's name, said once.
     let cfg = dir.join("bad.toml");
-    std::fs::write(&cfg, "[detector.strips]\nown_line_anchor = -1.0\n").unwrap();
+    std::fs::write(&cfg, "[detector.strips]\nmax_rows = 0\n").unwrap();
     let run = eval_real(&dir, &calib, &out, &["--config", cfg.to_str().unwrap()]);
     assert!(!run.status.success());
     let stderr = String::from_utf8_lossy(&run.stderr);
-    assert_eq!(
-        stderr.matches("strips.own_line_anchor").count(),
-        1,
-        "{stderr}"
-    );
+    assert_eq!(stderr.matches("strips.max_rows").count(), 1, "{stderr}");
 }
 
 /// The CRDLD test set beside the repository, if present.

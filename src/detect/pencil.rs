@@ -114,7 +114,7 @@ impl PencilOptions {
             ("min_separation_px", self.min_separation_px),
             ("comb_max_period_px", self.comb_max_period_px),
         ] {
-            if !(v.is_finite() && v >= BIN_PX && v <= 10_000.0) {
+            if !(v.is_finite() && (BIN_PX..=10_000.0).contains(&v)) {
                 return bad(format!(
                     "pencil.{name} = {v} must be within {BIN_PX}..=10000"
                 ));
@@ -606,9 +606,7 @@ impl PencilRows {
         }
         let sigma = SMOOTH_PX / BIN_PX;
         gaussian_1d(&self.hist, sigma, &mut self.kernel, &mut self.smooth);
-        let sep = (self.opts.min_separation_px / BIN_PX)
-            .round()
-            .max(1.0) as usize;
+        let sep = (self.opts.min_separation_px / BIN_PX).round().max(1.0) as usize;
         let nb = self.smooth.len();
         // Local mean over ±2 separations, by prefix sums.
         self.prefix.clear();
@@ -647,10 +645,7 @@ impl PencilRows {
             peaks = ?self.peaks.iter().map(|p| p.1).collect::<Vec<_>>(),
             "pencil profile's comb"
         );
-        match self
-            .comb
-            .filter(|c| c.comb.contrast >= COMB_MIN_CONTRAST)
-        {
+        match self.comb.filter(|c| c.comb.contrast >= COMB_MIN_CONTRAST) {
             Some(comb) => self.select_on_comb(&comb, &axis, sep, wide),
             None => {
                 for &(_, i) in &self.peaks {
@@ -932,8 +927,6 @@ mod tests {
     fn mismatched_buffers_are_an_error() {
         let mut p = PencilRows::new(PencilOptions::default(), 15.0, &Mounting::default()).unwrap();
         let mut rows = Vec::new();
-        assert!(p
-            .find(&[[0.0, 0.0, -1.0]], &[], &[1.0], &mut rows)
-            .is_err());
+        assert!(p.find(&[[0.0, 0.0, -1.0]], &[], &[1.0], &mut rows).is_err());
     }
 }

@@ -15,12 +15,12 @@ use serde::{Deserialize, Serialize};
 #[serde(deny_unknown_fields, default)]
 pub struct ThresholdOptions {
     /// About how many points to keep. When absent: [`DEFAULT_TARGET_POINTS`], or, for the
-    /// strips method, `strips.kept_share` of the working image's pixels (resolved with the
-    /// calibration, `omnirow config detector` shows the value in force).
+    /// strips method, [`super::strips::KEPT_SHARE`] of the working image's pixels (resolved
+    /// with the calibration, `omnirow config detector` shows the value in force).
     pub target_points: Option<usize>,
     /// Pixels at or below this value are never kept (background). When absent:
-    /// [`DEFAULT_MIN_LEVEL`], or, for the strips method, `strips.kept_min_level` (resolved
-    /// with the calibration, as `target_points` is).
+    /// [`DEFAULT_MIN_LEVEL`], or, for the strips method, [`super::strips::KEPT_MIN_LEVEL`]
+    /// (resolved with the calibration, as `target_points` is).
     pub min_level: Option<u8>,
 }
 

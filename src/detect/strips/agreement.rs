@@ -1,0 +1,245 @@
+//! The agreement of the strips' peaks seen from a candidate vanishing point (a_v, p_v): each
+//! peak at (a, p) below it lies at u = (a − a_v)/(p − p_v) in the pencil of lines through the
+//! point, with a width in u of its position's uncertainty over its depth p − p_v. The
+//! agreement is Σ over the pairs of peaks from different strips of wᵢwⱼ·K(Δu / √(sᵢ² + sⱼ²)),
+//! over (Σw)², times the share of the peaks below the point; K is the triweight kernel with a
+//! standard deviation of 1. At the rows' vanishing point the peaks of one row share one u in
+//! every strip, and the agreement peaks.
+
+use super::StripsRows;
+use multiversion::multiversion;
+
+/// Uncertainty (sigma, pixels) of a peak's position: the kernel's width in the agreement.
+pub(super) const PEAK_SIGMA_PX: f64 = 4.0;
+
+/// Peaks nearer the horizon than this (pixels below the candidate vanishing point) take no
+/// part in the agreement, the comb or the rows' lines: there the rows merge.
+pub(super) const MIN_DEPTH_PX: f64 = 12.0;
+
+/// The peaks seen from a candidate vanishing point, in columns sorted by u: u, the square
+/// of the kernel's width in u, weight and strip.
+#[derive(Debug, Clone, Default)]
+pub(super) struct SeenColumns {
+    pub(super) u: Vec<f64>,
+    s2: Vec<f64>,
+    pub(super) w: Vec<f64>,
+    pub(super) strip: Vec<u32>,
+}
+
+impl SeenColumns {
+    fn clear(&mut self) {
+        self.u.clear();
+        self.s2.clear();
+        self.w.clear();
+        self.strip.clear();
+    }
+
+    fn push(&mut self, u: f64, s: f64, w: f64, strip: u32) {
+        self.u.push(u);
+        self.s2.push(s * s);
+        self.w.push(w);
+        self.strip.push(strip);
+    }
+
+    pub(super) fn len(&self) -> usize {
+        self.u.len()
+    }
+
+    /// The peaks within `band` of `u`.
+    pub(super) fn within(&self, u: f64, band: f64) -> std::ops::Range<usize> {
+        let lo = self.u.partition_point(|&x| x < u - band);
+        let hi = self.u.partition_point(|&x| x <= u + band);
+        lo..hi
+    }
+
+    /// Σ over the pairs of peaks from different strips of wᵢwⱼ·K(Δu / √(sᵢ² + sⱼ²)) and the
+    /// peaks' total weight; K the triweight kernel with a standard deviation of 1.
+    fn pair_sum(&self) -> (f64, f64) {
+        pair_sum(&self.u, &self.s2, &self.w, &self.strip)
+    }
+}
+
+impl StripsRows {
+    /// Fills `self.columns` with the peaks below the candidate (a, p), sorted by u; returns
+    /// the share of the peaks' count that is there.
+    pub(super) fn see(&mut self, a: f64, p: f64) -> f64 {
+        // the peaks are in the strips' order, deepest last: those below are the last ones
+        let first = self.peaks.partition_point(|k| k.p - p <= MIN_DEPTH_PX);
+        let peaks = &self.peaks;
+        let key = |k: usize| sort_key((peaks[k].a - a) / (peaks[k].p - p), k);
+        self.keys.clear();
+        self.keys.extend((first..peaks.len()).map(key));
+        // sorting 8-byte keys is faster than sorting the peaks themselves
+        self.keys.sort_unstable();
+        self.columns.clear();
+        for &k in &self.keys {
+            let k = &peaks[(k & 0xffff_ffff) as usize];
+            let d = k.p - p;
+            self.columns
+                .push((k.a - a) / d, PEAK_SIGMA_PX / d, k.w, k.strip);
+        }
+        self.columns.len() as f64 / self.peaks.len().max(1) as f64
+    }
+
+    /// The agreement of the peaks seen from (a, p) (see the module's doc); 0 with fewer than
+    /// four peaks below the point. Counts the candidate in [`super::StripsResult::evaluated`].
+    pub(super) fn agreement(&mut self, a: f64, p: f64) -> f64 {
+        self.last.evaluated += 1;
+        let share = self.see(a, p);
+        if self.columns.len() < 4 {
+            return 0.0;
+        }
+        let (num, total) = self.columns.pair_sum();
+        if total <= 0.0 {
+            return 0.0;
+        }
+        num / (total * total) * share
+    }
+}
+
+/// [`SeenColumns::pair_sum`] on the columns. Compiled also for AVX2 (four lanes in one
+/// register), chosen at run time; the same operations in the same order either way.
+#[multiversion(targets("x86_64+avx2"))]
+fn pair_sum(u: &[f64], s2: &[f64], w: &[f64], strip: &[u32]) -> (f64, f64) {
+    let s2_max = s2.iter().fold(0.0f64, |m, &x| m.max(x));
+    let (mut num, mut total) = (0.0, 0.0);
+    let mut end = 0;
+    for i in 0..u.len() {
+        let (xu, xs2, xw) = (u[i], s2[i], w[i]);
+        total += xw;
+        // every pair within the kernel's support lies before `end` (a pair beyond the
+        // support adds an exact zero, so `end` only has to be far enough)
+        let reach = 3.0 * (xs2 + s2_max).sqrt();
+        end = end.max(i + 1);
+        while end < u.len() && u[end] - xu <= reach {
+            end += 1;
+        }
+        num += xw * pairs(u, s2, w, strip, i, end);
+    }
+    (num, total)
+}
+
+/// Σ over the peaks `i+1..end` of wⱼ·K(Δu / √(sᵢ² + sⱼ²)) for those from another strip
+/// than peak `i`; K the triweight kernel with a standard deviation of 1. Branch-free in
+/// four lanes: a pair outside the kernel's support or within one strip adds zero.
+#[inline(always)]
+fn pairs(u: &[f64], s2: &[f64], w: &[f64], strip: &[u32], i: usize, end: usize) -> f64 {
+    let (xu, xs2, xstrip) = (u[i], s2[i], strip[i]);
+    let r = i + 1..end;
+    let (u, s2, w, st) = (&u[r.clone()], &s2[r.clone()], &w[r.clone()], &strip[r]);
+    let term = |u: f64, s2: f64, w: f64, st: u32| {
+        let du = u - xu;
+        let k = 1.0 - du * du / (9.0 * (xs2 + s2));
+        let k = if k > 0.0 { k } else { 0.0 };
+        let w = if st != xstrip { w } else { 0.0 };
+        w * k * k * k
+    };
+    let mut acc = [0.0f64; 4];
+    let lanes = u
+        .chunks_exact(4)
+        .zip(s2.chunks_exact(4))
+        .zip(w.chunks_exact(4))
+        .zip(st.chunks_exact(4));
+    for (((u, s2), w), st) in lanes {
+        for l in 0..4 {
+            acc[l] += term(u[l], s2[l], w[l], st[l]);
+        }
+    }
+    let full = u.len() / 4 * 4;
+    for j in full..u.len() {
+        acc[0] += term(u[j], s2[j], w[j], st[j]);
+    }
+    (acc[0] + acc[1]) + (acc[2] + acc[3])
+}
+
+/// A key that sorts as `u` (rounded to f32, which orders all but near-equal values the
+/// same) with the index `i` (below 2³²) in its low half.
+fn sort_key(u: f64, i: usize) -> u64 {
+    let b = (u as f32).to_bits();
+    let ordered = if b >> 31 == 1 { !b } else { b | 0x8000_0000 };
+    ((ordered as u64) << 32) | (i as u64 & 0xffff_ffff)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::testing::uniform;
+    use super::*;
+
+    /// A peak seen from a candidate: u, the kernel's width in u, weight and strip.
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    struct Seen {
+        u: f64,
+        s: f64,
+        w: f64,
+        strip: u32,
+    }
+
+    fn columns(seen: &[Seen]) -> SeenColumns {
+        let mut c = SeenColumns::default();
+        for x in seen {
+            c.push(x.u, x.s, x.w, x.strip);
+        }
+        c
+    }
+
+    #[test]
+    fn the_lanes_pair_sum_is_the_pairs_sum_over_the_kernels_support() {
+        let mut r = uniform(17);
+        let mut seen: Vec<Seen> = (0..203)
+            .map(|_| Seen {
+                u: 4.0 * r() - 2.0,
+                s: 0.01 + 0.2 * r(),
+                w: r(),
+                strip: (r() * 12.0) as u32,
+            })
+            .collect();
+        seen.sort_by(|x, y| x.u.total_cmp(&y.u));
+        let c = columns(&seen);
+        let pairs = |c: &SeenColumns, i, end| pairs(&c.u, &c.s2, &c.w, &c.strip, i, end);
+        let direct = |i: usize, end: usize| -> f64 {
+            let x = seen[i];
+            seen[i + 1..end]
+                .iter()
+                .filter(|y| y.strip != x.strip)
+                .map(|y| {
+                    let z2 = (y.u - x.u).powi(2) / (x.s * x.s + y.s * y.s);
+                    y.w * (1.0 - z2 / 9.0).max(0.0).powi(3)
+                })
+                .sum()
+        };
+        let mut nonzero = 0;
+        for i in 0..seen.len() {
+            for end in [seen.len(), (i + 7).min(seen.len())] {
+                let (lanes, want) = (pairs(&c, i, end), direct(i, end));
+                assert!(
+                    (lanes - want).abs() <= 1e-12 * (1.0 + want),
+                    "{i}: {lanes} {want}"
+                );
+                nonzero += usize::from(want > 0.0);
+            }
+        }
+        assert!(nonzero > 300, "{nonzero}");
+        // a pair within one strip adds nothing however close
+        let c = columns(&[
+            seen[0],
+            Seen {
+                u: seen[0].u,
+                ..seen[0]
+            },
+        ]);
+        assert_eq!(pairs(&c, 0, 2), 0.0);
+    }
+
+    #[test]
+    fn keys_sort_as_their_u_then_their_index() {
+        let us = [-3.5, -0.0, 0.0, 1e-9, 2.0, -1e30, 7.25];
+        let mut keys: Vec<u64> = us
+            .iter()
+            .enumerate()
+            .map(|(i, &u)| sort_key(u, i))
+            .collect();
+        keys.sort_unstable();
+        let order: Vec<usize> = keys.iter().map(|k| (k & 0xffff_ffff) as usize).collect();
+        assert_eq!(order, [5, 0, 1, 2, 3, 4, 6]);
+    }
+}
