@@ -263,7 +263,7 @@ fn check_detector(o: &DetectorOptions, at: Option<usize>, c: &mut Check) {
 }
 
 /// The keys under `[detector]` that this version no longer reads
-/// ([`crate::detect::options::REMOVED`]), each with its line.
+/// ([`crate::detect::options::is_removed`]), each with its line.
 fn removed_detector_keys(root: &Table, text: &str) -> Vec<Problem> {
     fn walk(item: &Item, path: &mut Vec<String>, text: &str, found: &mut Vec<Problem>) {
         let Some(t) = item.as_table_like() else {
@@ -272,7 +272,7 @@ fn removed_detector_keys(root: &Table, text: &str) -> Vec<Problem> {
         for (name, child) in t.iter() {
             path.push(name.to_string());
             let dotted = path.join(".");
-            if crate::detect::options::REMOVED.contains(&dotted.as_str()) {
+            if crate::detect::options::is_removed(&dotted) {
                 let at = t
                     .get_key_value(name)
                     .and_then(|(k, _)| k.span())
@@ -435,8 +435,8 @@ mod tests {
             "{e}"
         );
         // every removed key is refused by name, and none is still an option
-        for k in crate::detect::options::REMOVED {
-            let (table, key) = k.rsplit_once('.').map_or(("", *k), |(t, k)| (t, k));
+        for k in crate::detect::options::removed_keys() {
+            let (table, key) = k.rsplit_once('.').unwrap_or(("", &k));
             let text = if table.is_empty() {
                 format!("[detector]\n{key} = 1\n")
             } else {

@@ -19,6 +19,7 @@ pub mod guidance;
 pub mod logging;
 pub mod memory;
 pub mod notify;
+pub mod perception;
 pub mod pipeline;
 pub mod publish;
 pub mod record;

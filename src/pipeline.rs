@@ -27,6 +27,7 @@ use crate::estimate::{Estimate, Status};
 use crate::frame::{now_ns, Frame, ImageView};
 use crate::gige::Recycler;
 use crate::guidance::Guidance;
+use crate::perception::{Measurement, NarrowSearch, Tracking, DEFAULT_MIN_QUALITY};
 use crate::publish::Publisher;
 use crate::record::{RecordState, Recorder};
 use crate::source::{Poll, Source, SourceState};
@@ -38,7 +39,8 @@ use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-/// The processing step the pipeline runs on each frame (the detector, or a test double).
+/// The processing step the pipeline runs on each frame: the perception step's
+/// [`Measurement`] (or a test double).
 pub trait Processor: Send {
     /// Detects rows, the vanishing point, heading and tilt in `view`, into `out`.
     fn process(
@@ -62,6 +64,29 @@ pub trait Processor: Send {
     /// guidance (a detector with a [`crate::guidance::RowFit`]); `None` by default.
     fn row_fit(&mut self, _det: &Detection) -> Option<crate::guidance::RowFitMeasurement> {
         None
+    }
+}
+
+impl Processor for Measurement {
+    fn process(
+        &mut self,
+        view: &ImageView,
+        out: &mut Detection,
+    ) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
+        self.detect(view, None, out).map_err(Into::into)
+    }
+
+    fn process_with_prior(
+        &mut self,
+        view: &ImageView,
+        prior: Option<&DetectorPrior>,
+        out: &mut Detection,
+    ) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
+        self.detect(view, prior, out).map_err(Into::into)
+    }
+
+    fn row_fit(&mut self, det: &Detection) -> Option<crate::guidance::RowFitMeasurement> {
+        Measurement::row_fit(self, det)
     }
 }
 
@@ -91,51 +116,13 @@ pub struct PipelineOptions {
     pub narrow_search: Option<NarrowSearch>,
 }
 
-/// How the tracker's prediction becomes the detector's prior (issue 14 §2): the vanishing
-/// point of the predicted heading and the last frame's tilt, in a window of `sigmas` times
-/// the heading's standard deviation, at least `min_window_rad` (the tilt is not tracked
-/// and moves with the ground). While the tracker is lost there is no prior.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct NarrowSearch {
-    pub mounting: Mounting,
-    pub min_window_rad: f64,
-    pub sigmas: f64,
-}
-
-impl NarrowSearch {
-    /// The defaults (`[pipeline]`): a window of 4 σ of the heading, at least 2°.
-    pub fn new(mounting: Mounting) -> Self {
-        NarrowSearch {
-            mounting,
-            min_window_rad: 2f64.to_radians(),
-            sigmas: 4.0,
-        }
-    }
-
-    /// The prior for the frames after `est` (guidance applied), or `None`. `tilt_rad`: the
-    /// last tilt the detector measured.
-    pub fn prior(&self, est: &Estimate, tilt_rad: f64) -> Option<DetectorPrior> {
-        let g = est.guidance.as_ref()?;
-        if !g.tracking.has_estimate() {
-            return None;
-        }
-        let heading = g.heading_rad?;
-        let sd = g.covariance?[1][1].max(0.0).sqrt();
-        let window = (self.sigmas * sd)
-            .max(self.min_window_rad)
-            .min(crate::detect::prior::MAX_WINDOW_RAD);
-        (heading.is_finite() && window.is_finite())
-            .then(|| DetectorPrior::from_heading_tilt(heading, tilt_rad, window, &self.mounting))
-    }
-}
-
 impl Default for PipelineOptions {
     fn default() -> Self {
         PipelineOptions {
             frame_queue: 2,
             estimate_queue: 8,
             record_queue: 4,
-            min_quality: 0.3,
+            min_quality: DEFAULT_MIN_QUALITY,
             max_frames: None,
             max_duration: None,
             status_interval: Duration::from_secs(1),
@@ -183,7 +170,13 @@ impl RawPipeline {
             frame_queue: frame_queue as usize,
             estimate_queue: estimate_queue as usize,
             record_queue: record_queue as usize,
-            min_quality: c.range("pipeline.min_quality", &self.min_quality, 0.3, 0.0, 1.0),
+            min_quality: c.range(
+                "pipeline.min_quality",
+                &self.min_quality,
+                DEFAULT_MIN_QUALITY,
+                0.0,
+                1.0,
+            ),
             status_interval: Duration::from_secs_f64(status_interval_s),
             ..PipelineOptions::default()
         };
@@ -403,10 +396,10 @@ impl Pipeline {
         // Estimate queue → publisher, in ticket order → publishers, recorder, latest frame.
         let order = Reorder::new(opts.estimate_queue + 2 * workers + 2);
         let mut out = Outlet::new(publishers, record, release);
-        out.guidance = opts.guidance.clone();
-        if out.guidance.is_some() {
-            out.narrow = opts.narrow_search.map(|n| (n, prior));
-        }
+        out.tracking = opts
+            .guidance
+            .clone()
+            .map(|g| (Tracking::new(g, opts.narrow_search), prior));
         let status_interval = opts.status_interval;
         threads.spawn("publisher", move |hb| {
             run_publisher(hb, done_rx, order, out, status_interval)
@@ -815,10 +808,9 @@ struct Outlet {
     record: Option<Queue<RecordItem>>,
     release: Release,
     last_seq: u64,
-    guidance: Option<Guidance>,
-    /// The tracker's prediction into the workers' prior, with the last measured tilt.
-    narrow: Option<(NarrowSearch, PriorSlot)>,
-    last_tilt_rad: f64,
+    /// Row guidance in frame order, and the prior its prediction leaves for the workers'
+    /// next frames.
+    tracking: Option<(Tracking, PriorSlot)>,
 }
 
 /// The detector prior the publisher leaves for the workers' next frames.
@@ -835,9 +827,7 @@ impl Outlet {
             record,
             release,
             last_seq: 0,
-            guidance: None,
-            narrow: None,
-            last_tilt_rad: 0.0,
+            tracking: None,
         }
     }
 
@@ -848,15 +838,9 @@ impl Outlet {
             mut estimate,
             ..
         } = done;
-        if let Some(g) = self.guidance.as_mut() {
-            estimate.apply_guidance(g);
-        }
-        if let Some((n, slot)) = &self.narrow {
-            if let Some(t) = estimate.tilt_rad {
-                self.last_tilt_rad = t;
-            }
-            *slot.lock().unwrap_or_else(|e| e.into_inner()) =
-                n.prior(&estimate, self.last_tilt_rad);
+        if let Some((t, slot)) = self.tracking.as_mut() {
+            let prior = t.track(&mut estimate);
+            *slot.lock().unwrap_or_else(|e| e.into_inner()) = prior;
         }
         estimate.stamp_published(now_ns());
         self.last_seq = estimate.seq;

@@ -99,8 +99,8 @@ fn missing_file_is_an_error_naming_it() {
 #[test]
 fn config_detector_shows_the_scales_of_a_calibration() {
     let root = env!("CARGO_MANIFEST_DIR");
-    // (the Hough cell in pixels, the accumulator's side in force)
-    let scales = |file: &str| -> (f64, usize) {
+    // (the Hough cell in pixels, the angular scales' factor in force)
+    let scales = |file: &str| -> (f64, f64) {
         let out = bin()
             .args(["config", "detector", "--calib"])
             .arg(format!("{root}/config/calib/{file}"))
@@ -111,7 +111,7 @@ fn config_detector_shows_the_scales_of_a_calibration() {
         assert!(text.contains("[detector.hough]"), "{text}");
         let line = text
             .lines()
-            .find(|l| l.contains("hough cell along phi"))
+            .find(|l| l.contains("hough cell"))
             .unwrap_or_else(|| panic!("{text}"));
         let px: f64 = line
             .split('=')
@@ -119,12 +119,12 @@ fn config_detector_shows_the_scales_of_a_calibration() {
             .and_then(|t| t.trim().trim_end_matches("px").trim().parse().ok())
             .unwrap_or_else(|| panic!("{line}"));
         // The values in force are written out, so that they can be pasted and fixed.
-        let bins: usize = text
+        let factor: f64 = text
             .lines()
-            .find_map(|l| l.strip_prefix("phi_bins = "))
+            .find_map(|l| l.strip_prefix("angle_scale = "))
             .and_then(|t| t.trim().parse().ok())
             .unwrap_or_else(|| panic!("{text}"));
-        (px, bins)
+        (px, factor)
     };
     // The Hough cell is a share of the field of view's extent: about the same number of
     // pixels through a lens with three times the focal length, so about 2.5 times the cells
@@ -135,10 +135,10 @@ fn config_detector_shows_the_scales_of_a_calibration() {
         scales("pinhole_512_f900.toml"),
     );
     assert!((b / a - 1.0).abs() < 0.2, "{a} px against {b} px");
-    let r = nb as f64 / na as f64;
-    assert!(r > 2.2 && r < 2.7, "{na} cells against {nb}");
-    assert_eq!(scales("fisheye185_gc2450c.toml").1, 90);
-    assert_eq!(scales("pal_gc2450c.toml").1, 90);
+    let r = na / nb;
+    assert!(r > 2.2 && r < 2.7, "factors {na} against {nb}");
+    assert_eq!(scales("fisheye185_gc2450c.toml").1, 1.0);
+    assert_eq!(scales("pal_gc2450c.toml").1, 1.0);
     let out = bin()
         .args(["config", "detector", "--calib", "/nonexistent/calib.toml"])
         .output()

@@ -10,10 +10,9 @@
 
 use crate::camera::{Calibration, IdealLens};
 use crate::config::Config;
-use crate::detect::{Detection, Detector, DetectorPrior};
-use crate::frame::ImageView;
-use crate::guidance::{Guidance, RowFit, RowFitMeasurement, RowFitOptions};
+use crate::guidance::Guidance;
 use crate::notify::Notifier;
+use crate::perception::Measurement;
 use crate::pipeline::{Pipeline, Processor};
 use crate::publish::http::{HttpServer, OverlayFn};
 use crate::publish::metrics::{TrackingCounter, TrackingCounts};
@@ -184,35 +183,6 @@ fn camera_source(_: &crate::gige::GigeConfig) -> anyhow::Result<Box<dyn Source>>
     )
 }
 
-/// The detector as the pipeline's processing step, with the rows' curvature fit when row
-/// guidance runs.
-struct DetectorWorker(Detector, Option<RowFit>);
-
-impl Processor for DetectorWorker {
-    fn process(
-        &mut self,
-        view: &ImageView,
-        out: &mut Detection,
-    ) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
-        self.0.process(view, out).map_err(Into::into)
-    }
-
-    fn process_with_prior(
-        &mut self,
-        view: &ImageView,
-        prior: Option<&DetectorPrior>,
-        out: &mut Detection,
-    ) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
-        self.0
-            .process_with_prior(view, prior, out)
-            .map_err(Into::into)
-    }
-
-    fn row_fit(&mut self, det: &Detection) -> Option<RowFitMeasurement> {
-        self.1.as_mut()?.measure_detection(det, self.0.points())
-    }
-}
-
 /// `omnirow run` and `omnirow record --out DIR`.
 pub fn run(args: RunArgs, record_to: Option<PathBuf>) -> anyhow::Result<ExitCode> {
     let mut cfg = configure(&args)?;
@@ -288,13 +258,15 @@ pub fn run(args: RunArgs, record_to: Option<PathBuf>) -> anyhow::Result<ExitCode
     let opts = cfg.detector.clone();
     let mut processors: Vec<Box<dyn Processor>> = Vec::new();
     for _ in 0..cfg.workers {
-        let fit = cfg
-            .guidance
-            .map(|_| RowFit::new(cal.mounting, RowFitOptions::default()));
-        processors.push(Box::new(DetectorWorker(
-            Detector::new(&cal, opts.clone()).context("detector")?,
-            fit,
-        )));
+        processors.push(Box::new(
+            Measurement::new(
+                &cal,
+                opts.clone(),
+                cfg.guidance.is_some(),
+                cfg.pipeline.min_quality,
+            )
+            .context("detector")?,
+        ));
     }
 
     // Publishers.

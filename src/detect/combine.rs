@@ -201,6 +201,82 @@ fn weighted_median_abs(
     0.0
 }
 
+/// Each method's inlier rows: their number and summed support.
+fn method_stats(rows: &[Row], inliers: &[bool]) -> [MethodStats; 3] {
+    let mut stats = [MethodStats::default(); 3];
+    for (r, _) in rows.iter().zip(inliers).filter(|(_, &ok)| ok) {
+        let Some(k) = slot(r.method) else { continue };
+        stats[k].support += r.support as f64;
+        stats[k].count += 1;
+    }
+    stats
+}
+
+/// Each method's scatter σₘ into `stats`: the weighted median residual (MAD scale) about
+/// its own robust direction (three or more rows), corrected for the two degrees of freedom
+/// the direction absorbs; with fewer rows, the residual about another method's direction.
+fn method_sigmas(
+    rows: &[Row],
+    inliers: &[bool],
+    v0: &Vector3<f64>,
+    floor_rad: f64,
+    stats: &mut [MethodStats; 3],
+    buf: &mut Vec<(f64, f64)>,
+) {
+    let mut own: [Option<Vector3<f64>>; 3] = [None, None, None];
+    for k in 0..3 {
+        if stats[k].count >= 3 {
+            let m0 = weighted_median_abs(rows, inliers, k, v0, buf);
+            let s0 = (1.4826 * m0).max(floor_rad);
+            let sup = |i: usize| rows[i].support as f64;
+            own[k] = irls(rows, inliers, Some(k), v0, &sup, &|_| s0);
+        }
+    }
+    for k in 0..3 {
+        let n = stats[k].count as f64;
+        // Another class's own direction: the Hough rows' first, as the most precise.
+        let other = [0, 2, 1]
+            .into_iter()
+            .filter(|&j| j != k)
+            .find_map(|j| own[j]);
+        let (reference, dof_scale) = match (own[k], other) {
+            (Some(v), _) => (v, (n / (n - 2.0)).sqrt()),
+            (None, Some(v)) => (v, 1.0),
+            (None, None) => (*v0, 1.0),
+        };
+        if stats[k].count > 0 {
+            let m = weighted_median_abs(rows, inliers, k, &reference, buf);
+            stats[k].sigma = (1.4826 * m * dof_scale).max(floor_rad);
+        }
+    }
+}
+
+/// Whether every Hough inlier has an inverse variance in `hough_var` (by Hough ordinal), and
+/// their mean over the inliers.
+fn hough_inverse_variances(
+    rows: &[Row],
+    inliers: &[bool],
+    hough_var: &[f64],
+    stats: &[MethodStats; 3],
+) -> (bool, f64) {
+    let mut inv_sum = 0.0;
+    let mut inv_ok = stats[0].count > 0;
+    let mut j = 0;
+    for (r, &ok) in rows.iter().zip(inliers) {
+        if r.method != Method::Hough {
+            continue;
+        }
+        if ok {
+            match hough_var.get(j) {
+                Some(&v) if v.is_finite() && v > 0.0 => inv_sum += 1.0 / v,
+                _ => inv_ok = false,
+            }
+        }
+        j += 1;
+    }
+    (inv_ok, inv_sum / stats[0].count.max(1) as f64)
+}
+
 /// Refits the vanishing point `v0` over the inlier rows (`inliers[i]`), weighting each method
 /// by its measured precision and each row robustly (see the module documentation).
 /// `floor_rad` bounds each method's σ from below so that a few rows agreeing by chance cannot
@@ -229,63 +305,12 @@ pub fn precision_fit(
     if rows.len() != inliers.len() {
         return None;
     }
-    let mut stats = [MethodStats::default(); 3];
-    for (r, _) in rows.iter().zip(inliers).filter(|(_, &ok)| ok) {
-        let Some(k) = slot(r.method) else { continue };
-        stats[k].support += r.support as f64;
-        stats[k].count += 1;
-    }
+    let mut stats = method_stats(rows, inliers);
     if stats.iter().map(|s| s.count).sum::<usize>() < 3 {
         return None;
     }
-    let buf = scratch;
-    // Each method's own robust direction (three or more rows) and its scatter: the weighted
-    // median residual about it (MAD scale), corrected for the two degrees of freedom the
-    // direction absorbs. Fewer rows: the residual about the other method's direction.
-    let mut own: [Option<Vector3<f64>>; 3] = [None, None, None];
-    for k in 0..3 {
-        if stats[k].count >= 3 {
-            let m0 = weighted_median_abs(rows, inliers, k, v0, buf);
-            let s0 = (1.4826 * m0).max(floor_rad);
-            let sup = |i: usize| rows[i].support as f64;
-            own[k] = irls(rows, inliers, Some(k), v0, &sup, &|_| s0);
-        }
-    }
-    for k in 0..3 {
-        let n = stats[k].count as f64;
-        // Another class's own direction: the Hough rows' first, as the most precise.
-        let other = [0, 2, 1]
-            .into_iter()
-            .filter(|&j| j != k)
-            .find_map(|j| own[j]);
-        let (reference, dof_scale) = match (own[k], other) {
-            (Some(v), _) => (v, (n / (n - 2.0)).sqrt()),
-            (None, Some(v)) => (v, 1.0),
-            (None, None) => (*v0, 1.0),
-        };
-        if stats[k].count > 0 {
-            let m = weighted_median_abs(rows, inliers, k, &reference, buf);
-            stats[k].sigma = (1.4826 * m * dof_scale).max(floor_rad);
-        }
-    }
-    // The Hough rows' inverse variances (by Hough ordinal) and their mean over the inliers,
-    // when every Hough inlier has one.
-    let mut inv_sum = 0.0;
-    let mut inv_ok = stats[0].count > 0;
-    let mut j = 0;
-    for (r, &ok) in rows.iter().zip(inliers) {
-        if r.method != Method::Hough {
-            continue;
-        }
-        if ok {
-            match hough_var.get(j) {
-                Some(&v) if v.is_finite() && v > 0.0 => inv_sum += 1.0 / v,
-                _ => inv_ok = false,
-            }
-        }
-        j += 1;
-    }
-    let inv_mean = inv_sum / stats[0].count.max(1) as f64;
+    method_sigmas(rows, inliers, v0, floor_rad, &mut stats, scratch);
+    let (inv_ok, inv_mean) = hough_inverse_variances(rows, inliers, hough_var, &stats);
     let hough_ordinal = |i: usize| {
         rows[..i]
             .iter()
@@ -336,6 +361,21 @@ pub fn precision_fit(
         sigma_hough: stats[0].sigma,
         sigma_edge: stats[1].sigma,
         sigma_paired: stats[2].sigma,
+    })
+}
+
+/// The centre line of two boundaries of one crop row: their bisecting plane, a row of its
+/// own class ([`Method::Combined`]) with their summed support; `None` when they cancel.
+fn centre_line(l: &Row, r: &Row) -> Option<Row> {
+    let (nl, nr) = (l.normal, r.normal);
+    let nr = if nl.dot(&nr) < 0.0 { -nr } else { nr };
+    let c = nl + nr;
+    let norm = c.norm();
+    (norm > 1e-12).then(|| Row {
+        normal: c / norm,
+        method: Method::Combined,
+        support: l.support.saturating_add(r.support),
+        width_rad: 0.0,
     })
 }
 
@@ -410,18 +450,8 @@ pub fn pair_edge_rows(
             .map(|(j, &(p, i, _))| (p, rows[i].support, j));
         let [left, right] = strongest_either_side(ph, limit, edges);
         if let (Some((_, _, jl)), Some((_, _, jr))) = (left, right) {
-            let (l, r) = (psi[jl].1, psi[jr].1);
-            let (nl, nr) = (rows[l].normal, rows[r].normal);
-            let nr = if nl.dot(&nr) < 0.0 { -nr } else { nr };
-            let c = nl + nr;
-            let norm = c.norm();
-            if norm > 1e-12 {
-                out.push(Row {
-                    normal: c / norm,
-                    method: Method::Combined,
-                    support: rows[l].support.saturating_add(rows[r].support),
-                    width_rad: 0.0,
-                });
+            if let Some(centre) = centre_line(&rows[psi[jl].1], &rows[psi[jr].1]) {
+                out.push(centre);
                 out_inliers.push(true);
                 psi[jl].2 = Kind::Paired;
                 psi[jr].2 = Kind::Paired;

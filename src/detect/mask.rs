@@ -11,7 +11,7 @@
 //! greyscale input.) (3) A user mask image, white = use (camera mount, robot body).
 //! The per-pixel ray table the Hough stage needs is built in the same pass.
 
-use super::{DetectError, GreyImage};
+use super::types::{DetectError, GreyImage};
 use crate::camera::{Calibration, FovMask};
 use crate::frame::ImageView;
 use serde::{Deserialize, Serialize};

@@ -5,7 +5,7 @@
 //! threshold's target for the method).
 //!
 //! Every option has one line in [`OPTIONS`], which `omnirow config detector` prints above it;
-//! the keys earlier versions had and no longer do are in [`REMOVED`], so that a
+//! the keys earlier versions had and no longer do are [`is_removed`], so that a
 //! configuration still setting one is told so ([`crate::config`]).
 
 use super::combine::REFERENCE_PAIR_MAX_DEG;
@@ -106,97 +106,39 @@ pub const OPTIONS: &[(&str, &str)] = &[
     ("vanishing.inlier_deg", "how far (degrees) a row may pass from the vanishing point and count; absent: from the calibration; raise it for bent rows"),
 ];
 
-/// Keys that earlier versions read and this one does not (dotted under `[detector]`): fixed
-/// behaviour now, or experiments that did not win (docs/detector.md, docs/real.md). A
-/// configuration that sets one is refused with the key named as removed.
-pub const REMOVED: &[&str] = &[
-    "auto_bin_above_px",
-    "hough.phi_bins",
-    "hough.theta_bins",
-    "hough.min_peak_fraction",
-    "hough.nms_radius",
-    "hough.refine_iterations",
-    "hough.min_tolerance_deg",
-    "hough.merge_angle_deg",
-    "hough.max_degeneracy",
-    "hough.vote_points",
-    "refit.enabled",
-    "refit.iterations",
-    "refit.background_fraction",
-    "refit.margin_px",
-    "refit.perspective",
-    "refit.full_sections",
-    "refit.wedge",
-    "refit.plateau_cap",
-    "refit.precision_weights",
-    "refit.sections",
-    "refit.section_bins",
-    "refit.section_huber",
-    "refit.section_power",
-    "refit.near_min_sigma",
-    "edge.mask_margin_px",
-    "edge.downsample",
-    "edge.canny",
-    "edge.chains",
-    "edge.split",
-    "edge.merge",
-    "combined.precision_weighting",
-    "combined.precision_floor_mrad",
-    "combined.consensus",
-    "combined.pair_edge_rows",
-    "combined.pair_max_deg",
-    "combined.reject_edge_outliers",
-    "pencil.bin_px",
-    "pencil.reference_px",
-    "pencil.search_step_px",
-    "pencil.search_points",
-    "pencil.smooth_px",
-    "pencil.min_prominence",
-    "pencil.min_peak_fraction",
-    "pencil.refine_iterations",
-    "pencil.max_tan",
-    "pencil.candidates",
-    "pencil.coverage_power",
-    "pencil.polish",
-    "pencil.polish_max_band_deg",
-    "pencil.comb",
-    "pencil.comb_min_contrast",
-    "pencil.comb_weak_prominence",
-    "pencil.comb_max_roll_deg",
-    "pencil.comb_power",
-    "pencil.seed_with_combined",
-    "strips.strip_px",
-    "strips.kept_share",
-    "strips.kept_min_level",
-    "strips.smooth_px",
-    "strips.peak_fraction",
-    "strips.peak_sigma_px",
-    "strips.search_step_px",
-    "strips.search_starts",
-    "strips.search_comb_power",
-    "strips.search_comb_reach_px",
-    "strips.search_regions",
-    "strips.search_coarse_share",
-    "strips.search_blur",
-    "strips.min_depth_px",
-    "strips.min_strips",
-    "strips.min_strips_share",
-    "strips.min_strips_floor",
-    "strips.comb_periods",
-    "strips.comb_band",
-    "strips.polish",
-    "strips.polish_max_band_deg",
-    "strips.recentre_rounds",
-    "strips.prominence_px",
-    "strips.straighten",
-    "strips.own_lines",
-    "strips.own_line_anchor",
-    "strips.own_line_reject",
-    "vanishing.azimuth_bins",
-    "vanishing.elevation_bin_deg",
-    "vanishing.min_spread_deg",
-    "vanishing.refine_iterations",
+/// Keys that earlier versions read and this one does not, by section under `[detector]`
+/// (`""`: the section itself): fixed behaviour now, or experiments that did not win
+/// (docs/detector.md, docs/real.md). A configuration that sets one is refused with the key
+/// named as removed ([`is_removed`]).
+const REMOVED: &[(&str, &str)] = &[
+    ("", "auto_bin_above_px"),
+    ("hough", "phi_bins theta_bins min_peak_fraction nms_radius refine_iterations min_tolerance_deg merge_angle_deg max_degeneracy vote_points"),
+    ("refit", "enabled iterations background_fraction margin_px perspective full_sections wedge plateau_cap precision_weights sections section_bins section_huber section_power near_min_sigma"),
+    ("edge", "mask_margin_px downsample canny chains split merge"),
+    ("combined", "precision_weighting precision_floor_mrad consensus pair_edge_rows pair_max_deg reject_edge_outliers"),
+    ("pencil", "bin_px reference_px search_step_px search_points smooth_px min_prominence min_peak_fraction refine_iterations max_tan candidates coverage_power polish polish_max_band_deg comb comb_min_contrast comb_weak_prominence comb_max_roll_deg comb_power seed_with_combined"),
+    ("strips", "strip_px kept_share kept_min_level smooth_px peak_fraction peak_sigma_px search_step_px search_starts search_comb_power search_comb_reach_px search_regions search_coarse_share search_blur min_depth_px min_strips min_strips_share min_strips_floor comb_periods comb_band polish polish_max_band_deg recentre_rounds prominence_px straighten own_lines own_line_anchor own_line_reject"),
+    ("vanishing", "azimuth_bins elevation_bin_deg min_spread_deg refine_iterations"),
 ];
+
+/// Whether the dotted key under `[detector]` is one that earlier versions read
+/// ([`REMOVED`]).
+pub fn is_removed(key: &str) -> bool {
+    let (section, name) = key.rsplit_once('.').unwrap_or(("", key));
+    REMOVED
+        .iter()
+        .any(|(s, names)| *s == section && names.split(' ').any(|n| n == name))
+}
+
+/// Every removed key, dotted under `[detector]`.
+pub fn removed_keys() -> impl Iterator<Item = String> {
+    REMOVED.iter().flat_map(|(s, names)| {
+        names.split(' ').map(move |n| match *s {
+            "" => n.to_string(),
+            s => format!("{s}.{n}"),
+        })
+    })
+}
 
 impl DetectorOptions {
     /// The options the preparation reads.
@@ -418,7 +360,7 @@ mod tests {
         assert_eq!(keys, sorted);
         for (k, doc) in OPTIONS {
             assert!(!doc.is_empty() && !doc.contains('\n'), "{k}");
-            assert!(!REMOVED.contains(k), "{k}");
+            assert!(!is_removed(k), "{k}");
         }
     }
 

@@ -508,14 +508,8 @@ impl PencilRows {
         Ok(res)
     }
 
-    /// The comb fitted by the last [`Self::read_rows`] (used for the rows only when its
-    /// contrast is at least `comb_min_contrast`).
-    pub fn last_comb(&self) -> Option<RolledComb> {
-        self.comb
-    }
-
     /// The comb of the smoothed profile (periods from `sep` bins to
-    /// `comb_max_period_px`), when enabled.
+    /// `comb_max_period_px`).
     fn fit_comb(&mut self, sep: usize, axis: &TanAxis) -> Option<RolledComb> {
         let search = comb_search(sep, &self.opts);
         self.comb_peaks.clear();
@@ -587,6 +581,63 @@ impl PencilRows {
         self.teeth = taken;
     }
 
+    /// The smoothed profile's peaks into `self.peaks` (excess over the local mean, bin),
+    /// strongest first: its local maxima standing `MIN_PROMINENCE` above the mean over ±`wide`
+    /// bins, and at least `MIN_PEAK_FRACTION` of the strongest's excess. Leaves the profile's
+    /// prefix sums in `self.prefix`.
+    fn profile_peaks(&mut self, wide: usize) {
+        let nb = self.smooth.len();
+        self.prefix.clear();
+        self.prefix.push(0.0);
+        let mut acc = 0.0;
+        for &x in &self.smooth {
+            acc += x;
+            self.prefix.push(acc);
+        }
+        self.peaks.clear();
+        for i in 1..nb.saturating_sub(1) {
+            let x = self.smooth[i];
+            if !(x >= self.smooth[i - 1] && x > self.smooth[i + 1]) {
+                continue;
+            }
+            let lo = i.saturating_sub(wide);
+            let hi = (i + wide + 1).min(nb);
+            let mean = (self.prefix[hi] - self.prefix[lo]) / (hi - lo) as f64;
+            if x > mean * (1.0 + MIN_PROMINENCE) && x > 0.0 {
+                self.peaks.push((x - mean, i));
+            }
+        }
+        self.peaks
+            .sort_unstable_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+        let floor = self.peaks.first().map_or(0.0, |p| p.0) * MIN_PEAK_FRACTION;
+        self.peaks.retain(|p| p.0 >= floor);
+    }
+
+    /// The rows' bins into `self.sel`: on the peaks' comb when it is strong enough
+    /// ([`Self::select_on_comb`]), else the strongest peaks at least `sep` bins apart.
+    fn select_rows(&mut self, sep: usize, wide: usize, axis: &TanAxis) {
+        self.sel.clear();
+        self.comb = self.fit_comb(sep, axis);
+        tracing::debug!(
+            comb = ?self.comb,
+            peaks = ?self.peaks.iter().map(|p| p.1).collect::<Vec<_>>(),
+            "pencil profile's comb"
+        );
+        match self.comb.filter(|c| c.comb.contrast >= COMB_MIN_CONTRAST) {
+            Some(comb) => self.select_on_comb(&comb, axis, sep, wide),
+            None => {
+                for &(_, i) in &self.peaks {
+                    if self.sel.len() >= self.opts.max_rows {
+                        break;
+                    }
+                    if self.sel.iter().all(|&j| i.abs_diff(j) >= sep) {
+                        self.sel.push(i);
+                    }
+                }
+            }
+        }
+    }
+
     /// Reads the rows off the profile around `v`: smoothed, the local maxima standing
     /// `min_prominence` above the local mean, at least `min_separation_px` apart, strongest
     /// first; each row's position the weighted mean of its peak.
@@ -607,60 +658,17 @@ impl PencilRows {
         let sigma = SMOOTH_PX / BIN_PX;
         gaussian_1d(&self.hist, sigma, &mut self.kernel, &mut self.smooth);
         let sep = (self.opts.min_separation_px / BIN_PX).round().max(1.0) as usize;
-        let nb = self.smooth.len();
-        // Local mean over ±2 separations, by prefix sums.
-        self.prefix.clear();
-        self.prefix.push(0.0);
-        let mut acc = 0.0;
-        for &x in &self.smooth {
-            acc += x;
-            self.prefix.push(acc);
-        }
         let wide = 2 * sep;
-        self.peaks.clear();
-        for i in 1..nb.saturating_sub(1) {
-            let x = self.smooth[i];
-            if !(x >= self.smooth[i - 1] && x > self.smooth[i + 1]) {
-                continue;
-            }
-            let lo = i.saturating_sub(wide);
-            let hi = (i + wide + 1).min(nb);
-            let mean = (self.prefix[hi] - self.prefix[lo]) / (hi - lo) as f64;
-            if x > mean * (1.0 + MIN_PROMINENCE) && x > 0.0 {
-                self.peaks.push((x - mean, i));
-            }
-        }
-        self.peaks
-            .sort_unstable_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
-        let floor = self.peaks.first().map_or(0.0, |p| p.0) * MIN_PEAK_FRACTION;
-        self.peaks.retain(|p| p.0 >= floor);
-        self.sel.clear();
+        self.profile_peaks(wide);
         let axis = TanAxis {
             start: -MAX_TAN,
             bin: bw,
         };
-        self.comb = self.fit_comb(sep, &axis);
-        tracing::debug!(
-            comb = ?self.comb,
-            peaks = ?self.peaks.iter().map(|p| p.1).collect::<Vec<_>>(),
-            "pencil profile's comb"
-        );
-        match self.comb.filter(|c| c.comb.contrast >= COMB_MIN_CONTRAST) {
-            Some(comb) => self.select_on_comb(&comb, &axis, sep, wide),
-            None => {
-                for &(_, i) in &self.peaks {
-                    if self.sel.len() >= self.opts.max_rows {
-                        break;
-                    }
-                    if self.sel.iter().all(|&j| i.abs_diff(j) >= sep) {
-                        self.sel.push(i);
-                    }
-                }
-            }
-        }
+        self.select_rows(sep, wide, &axis);
         let Some((e1, e2)) = pencil_frame(v, &-self.axes.up) else {
             return 0;
         };
+        let nb = self.smooth.len();
         let m = MAX_TAN;
         let start = rows.len();
         for k in 0..self.sel.len() {

@@ -15,7 +15,7 @@ use super::smooth::{Gaussian, SmoothOptions};
 use super::threshold::{keep_brightest, ThresholdOptions, ThresholdResult};
 use super::types::{DetectError, GreyImage, Row};
 use super::vegetation::{vegetation_image, working_factor, Binning, VegetationOptions};
-use crate::camera::{Calibration, FovMask};
+use crate::camera::Calibration;
 use crate::frame::{ImageView, PixelFormat};
 use nalgebra::Vector3;
 
@@ -80,7 +80,6 @@ pub struct Preparer {
     fov_auto: bool,
     opts: PrepareOptions,
     gauss: Gaussian,
-    user_mask: Option<GreyImage>,
     setup: Option<Setup>,
     veg: GreyImage,
     smoothed: GreyImage,
@@ -113,7 +112,6 @@ impl Preparer {
             cal: cal.clone(),
             opts: *opts,
             gauss: Gaussian::new(&opts.smooth)?,
-            user_mask: None,
             setup: None,
             veg: GreyImage::default(),
             smoothed: GreyImage::default(),
@@ -123,21 +121,6 @@ impl Preparer {
             fits: RowFits::with_capacity(256),
             last_threshold: ThresholdResult::default(),
         })
-    }
-
-    /// Sets an optional user mask image (white = use), at any resolution with the image's
-    /// aspect. Takes effect at the next image.
-    pub fn set_user_mask(&mut self, mask: Option<GreyImage>) {
-        self.user_mask = mask;
-        self.setup = None;
-    }
-
-    /// Replaces the field-of-view mask (calibration's own pixels); `None` = find it from the
-    /// next image if the calibration has none. Takes effect at the next image.
-    pub fn set_fov_mask(&mut self, mask: Option<FovMask>) {
-        self.fov_auto = mask.is_none();
-        self.cal.mask = mask;
-        self.setup = None;
     }
 
     /// When the field-of-view mask is found from the image, finds it again in `view` and
@@ -206,7 +189,7 @@ impl Preparer {
             &work_cal,
             &self.opts.mask,
             self.opts.max_tilt_deg,
-            self.user_mask.as_ref(),
+            None,
             &mut mask,
             &mut rays,
             &mut solid,

@@ -7,7 +7,7 @@
 //! exactly at the level are thinned evenly so that the total stays near N even when many
 //! pixels share one value (a saturated image).
 
-use super::DetectError;
+use super::types::DetectError;
 use serde::{Deserialize, Serialize};
 
 /// Options of the adaptive threshold.

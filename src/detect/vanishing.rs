@@ -234,35 +234,14 @@ impl VanishingFinder {
         let Some(v0) = self.winner() else {
             return Ok(none);
         };
-        let mut v = self.robot_from_camera.inverse() * v0;
+        let v = self.robot_from_camera.inverse() * v0;
         let s_tol = self.opts.inlier_deg.to_radians().sin();
-        let mut residual = 0.0;
-        let mut inlier_weight = 0.0;
-        let mut count = 0usize;
-        for _ in 0..REFINE_ITERATIONS {
-            let mut sc = Scatter::new();
-            let mut changed = false;
-            for (i, r) in rows.iter().enumerate() {
-                let ok = r.normal.dot(&v).abs() < s_tol && weights[i] > 0.0;
-                changed |= ok != inliers[i];
-                inliers[i] = ok;
-                if ok {
-                    sc.add(&r.normal, weights[i]);
-                }
-            }
-            count = sc.count();
-            if count < 2 {
-                break;
-            }
-            let Some(fit) = sc.fit() else { break };
-            let moved = axis_angle(&fit.normal, &v);
-            v = fit.normal;
-            residual = fit.mean_sq_residual.max(0.0).sqrt().asin();
-            inlier_weight = fit.weight;
-            if !changed && moved < 1e-12 {
-                break;
-            }
-        }
+        let (mut v, fit) = refine(rows, weights, inliers, v, s_tol);
+        let Fitted {
+            residual,
+            inlier_weight,
+            count,
+        } = fit;
         // Final inlier set for the final direction.
         let mut count_final = 0;
         for (i, r) in rows.iter().enumerate() {
@@ -274,15 +253,7 @@ impl VanishingFinder {
             return Ok(none);
         }
         // Rows that all share one normal do not fix a direction.
-        let mut spread: f64 = 0.0;
-        for i in 0..rows.len() {
-            for j in i + 1..rows.len() {
-                if inliers[i] && inliers[j] {
-                    spread = spread.max(axis_angle(&rows[i].normal, &rows[j].normal));
-                }
-            }
-        }
-        if spread < self.opts.min_spread_deg.to_radians() {
+        if spread(rows, inliers) < self.opts.min_spread_deg.to_radians() {
             inliers.fill(false);
             return Ok(none);
         }
@@ -486,6 +457,65 @@ impl VanishingStage {
         };
         out.set_vanishing_point(direction, vp.inliers, residual_rad);
     }
+}
+
+/// What [`refine`] fitted: the inliers' RMS residual (radians), their weight and number.
+#[derive(Debug, Clone, Copy, Default)]
+struct Fitted {
+    residual: f64,
+    inlier_weight: f64,
+    count: usize,
+}
+
+/// The direction `v` refitted over the rows within `s_tol` (sine of the inlier tolerance)
+/// of it, iterated until the inlier set and the direction settle; `inliers` holds the last
+/// iteration's.
+fn refine(
+    rows: &[Row],
+    weights: &[f64],
+    inliers: &mut [bool],
+    mut v: Vector3<f64>,
+    s_tol: f64,
+) -> (Vector3<f64>, Fitted) {
+    let mut f = Fitted::default();
+    for _ in 0..REFINE_ITERATIONS {
+        let mut sc = Scatter::new();
+        let mut changed = false;
+        for (i, r) in rows.iter().enumerate() {
+            let ok = r.normal.dot(&v).abs() < s_tol && weights[i] > 0.0;
+            changed |= ok != inliers[i];
+            inliers[i] = ok;
+            if ok {
+                sc.add(&r.normal, weights[i]);
+            }
+        }
+        f.count = sc.count();
+        if f.count < 2 {
+            break;
+        }
+        let Some(fit) = sc.fit() else { break };
+        let moved = axis_angle(&fit.normal, &v);
+        v = fit.normal;
+        f.residual = fit.mean_sq_residual.max(0.0).sqrt().asin();
+        f.inlier_weight = fit.weight;
+        if !changed && moved < 1e-12 {
+            break;
+        }
+    }
+    (v, f)
+}
+
+/// The largest angle between two inlier rows' normals.
+fn spread(rows: &[Row], inliers: &[bool]) -> f64 {
+    let mut spread: f64 = 0.0;
+    for i in 0..rows.len() {
+        for j in i + 1..rows.len() {
+            if inliers[i] && inliers[j] {
+                spread = spread.max(axis_angle(&rows[i].normal, &rows[j].normal));
+            }
+        }
+    }
+    spread
 }
 
 /// Refits the direction over the `inliers` rows, each weighted by `weights[i]` (e.g. the

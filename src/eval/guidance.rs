@@ -7,9 +7,9 @@
 //! and one PNG per drive of the offset, truth and estimate over time (drawn with [`super::chart`]).
 
 use super::chart::{Chart, ChartError, Kind, Series};
-use crate::detect::{Detection, Detector, DetectorOptions};
-use crate::estimate::Estimate;
-use crate::guidance::{CropState, Guidance, GuidanceOptions, RowFit, RowFitOptions};
+use crate::detect::DetectorOptions;
+use crate::guidance::CropState;
+use crate::perception::{Perception, PerceptionOptions};
 use crate::source::synthetic::{SyntheticDrive, SyntheticDriveOptions};
 use std::path::{Path, PathBuf};
 
@@ -160,9 +160,9 @@ fn quantile(v: &mut [f64], p: f64) -> f64 {
     v[((v.len() - 1) as f64 * p).round() as usize]
 }
 
-/// Runs one drive through the detector (with `detector` options), the row fit and guidance;
-/// with `narrow`, each frame's search is narrowed by the tracker's prediction as the node's
-/// pipeline does ([`crate::pipeline::NarrowSearch`]).
+/// Runs one drive through the perception step (the detector with `detector` options, the
+/// row fit and guidance); with `narrow`, each frame's search is narrowed by the tracker's
+/// prediction as the node's pipeline does ([`crate::perception::NarrowSearch`]).
 pub fn run_drive(
     s: &Scenario,
     detector: &DetectorOptions,
@@ -174,13 +174,12 @@ pub fn run_drive(
     };
     let mut drive = SyntheticDrive::new(s.drive.clone()).map_err(|e| fail(e.to_string()))?;
     let cal = drive.calibration().clone();
-    let mut det = Detector::new(&cal, detector.clone()).map_err(|e| fail(e.to_string()))?;
-    let mut fit = RowFit::new(cal.mounting, RowFitOptions::default());
-    let mut guidance =
-        Guidance::new(GuidanceOptions::default(), cal.mounting).map_err(|e| fail(e.to_string()))?;
-    let mut d = Detection::default();
-    let narrow = narrow.then(|| crate::pipeline::NarrowSearch::new(cal.mounting));
-    let (mut prior, mut tilt) = (None, 0.0);
+    let opts = PerceptionOptions {
+        detector: detector.clone(),
+        narrow_search: narrow,
+        ..PerceptionOptions::default()
+    };
+    let mut perception = Perception::new(&cal, &opts).map_err(|e| fail(e.to_string()))?;
     let (mut offs, mut heads, mut curv) = (Vec::new(), Vec::new(), Vec::new());
     let mut score = DriveScore {
         name: s.name.to_string(),
@@ -201,16 +200,9 @@ pub fn run_drive(
     let mut prev: Option<(f64, f64)> = None;
     for seq in 0..s.frames {
         let frame = drive.frame_at(seq).map_err(|e| fail(e.to_string()))?;
-        let view = frame.view().map_err(|e| fail(e.to_string()))?;
-        det.process_with_prior(&view, prior.as_ref(), &mut d)
+        let est = perception
+            .process(&frame)
             .map_err(|e| fail(e.to_string()))?;
-        let mut est = Estimate::from_detection(&frame, &d, 0.0, 0.3);
-        est.row_fit = fit.measure_detection(&d, det.points());
-        est.apply_guidance(&mut guidance);
-        if let Some(n) = &narrow {
-            tilt = est.tilt_rad.unwrap_or(tilt);
-            prior = n.prior(&est, tilt);
-        }
         let (Some(t), Some(g)) = (est.truth.as_ref(), est.guidance.as_ref()) else {
             return Err(fail("a frame without truth or guidance".into()));
         };

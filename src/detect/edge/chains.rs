@@ -52,12 +52,6 @@ impl Chains {
     pub fn is_empty(&self) -> bool {
         self.ranges.is_empty()
     }
-
-    /// The rays of chain `k`.
-    pub fn chain_rays(&self, k: usize) -> &[Vector3<f64>] {
-        let (a, b) = self.ranges[k];
-        &self.rays[a as usize..b as usize]
-    }
 }
 
 /// What one tracing run found.

@@ -10,7 +10,7 @@
 //! no point buffer. Each row keeps its support: the number of points of its sections.
 
 use super::EdgeError;
-use crate::detect::{Method, Row};
+use crate::detect::types::{Method, Row};
 use crate::sphere::Scatter;
 use nalgebra::Vector3;
 

@@ -25,7 +25,7 @@ pub use merge::{MergeParams, MergeResult, Merger, REFERENCE_MAX_ANGLE_RAD};
 pub use split::{Section, SplitParams, SplitResult, Splitter};
 
 use crate::camera::Calibration;
-use crate::detect::Row;
+use crate::detect::types::Row;
 use crate::frame::{ImageView, PixelFormat};
 use serde::{Deserialize, Serialize};
 

@@ -12,7 +12,7 @@ use crate::detect::boundaries::Boundaries;
 use crate::detect::centre::CentreLines;
 use crate::detect::chords::{Bend, ChordBend};
 use crate::detect::combine::{PrecisionRefit, REFERENCE_PAIR_MAX_DEG};
-use crate::detect::edge::{EdgeOptions, EdgeResult};
+use crate::detect::edge::EdgeOptions;
 use crate::detect::refit::{turn_to_feet, NEAR_MIN_SIGMA};
 use crate::detect::types::{DetectError, Detection, Method, Row};
 use std::any::Any;
@@ -64,11 +64,6 @@ impl EdgeMethod {
             centre_bands: Vec::with_capacity(64),
             pair_max_rad: (REFERENCE_PAIR_MAX_DEG * angle_factor).to_radians(),
         })
-    }
-
-    /// What the edge detector did in the last frame.
-    pub fn last_edge(&self) -> EdgeResult {
-        self.boundaries.last()
     }
 
     /// The bend the method found in its rows in the last frame, when it turned them.

@@ -9,7 +9,7 @@
 use super::agreement::{SeenColumns, MIN_DEPTH_PX};
 use super::fourier::fourier;
 use super::StripsRows;
-use crate::detect::{Method, Row};
+use crate::detect::types::{Method, Row};
 
 /// Periods tried between `comb_min_period` and `comb_max_period`, geometrically spaced.
 const COMB_PERIODS: usize = 160;

@@ -40,7 +40,7 @@ mod testing;
 mod virtual_image;
 
 use super::pose::RobotAxes;
-use super::{DetectError, Row};
+use super::types::{DetectError, Row};
 use crate::camera::Mounting;
 use agreement::SeenColumns;
 use nalgebra::Vector3;

@@ -18,10 +18,9 @@ pub use score::{ImageScore, LabelFit, ProjectedRow, ScoreOptions};
 
 use crate::camera::Calibration;
 use crate::detect::method::strips::StripsMethod;
-use crate::detect::{DetectError, Detection, Detector, DetectorOptions, Method};
-use crate::estimate::Estimate;
+use crate::detect::{Detection, Detector, DetectorOptions, Method};
 use crate::frame::{Frame, ImageView, PixelFormat};
-use crate::guidance::{Guidance, GuidanceOptions, RowFit, RowFitOptions};
+use crate::perception::{Perception, PerceptionError, PerceptionOptions};
 use nalgebra::Vector3;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -38,8 +37,8 @@ pub enum RealEvalError {
     },
     #[error("{0}: no images (PNG, JPEG, PGM/PPM, BMP) in the folder")]
     NoImages(PathBuf),
-    #[error("detector: {0}")]
-    Detector(#[from] DetectError),
+    #[error(transparent)]
+    Perception(#[from] PerceptionError),
 }
 
 /// What to score.
@@ -246,12 +245,17 @@ pub fn run(
 ) -> Result<RealResults, RealEvalError> {
     let mut images = list_images(&opts.images)?;
     images.truncate(opts.limit.unwrap_or(usize::MAX));
-    let mut detector = Detector::new(&opts.calibration, opts.detector.clone())?;
+    let step = PerceptionOptions {
+        detector: opts.detector.clone(),
+        narrow_search: true,
+        ..PerceptionOptions::default()
+    };
+    let mut perception = Perception::new(&opts.calibration, &step)?;
     let mut det = Detection::default();
     let mut outcomes = Vec::with_capacity(images.len());
     for (i, path) in images.iter().enumerate() {
         let mut o = RealOutcome::new(path);
-        if let Err(e) = score_one(opts, &mut detector, &mut det, path, &mut o) {
+        if let Err(e) = score_one(opts, &mut perception, &mut det, path, &mut o) {
             o.error = Some(e);
         }
         outcomes.push(o);
@@ -259,7 +263,7 @@ pub fn run(
     }
     Ok(RealResults {
         outcomes,
-        method: detector.options().method,
+        method: perception.detector().options().method,
         requested: opts.detector.method,
     })
 }
@@ -278,21 +282,17 @@ fn vp_agreement(detector: &mut Detector, labels_vp: Option<&Vector3<f64>>) -> Op
     })
 }
 
-/// Runs `img` as `n` frames at 15 fps of a robot standing still through `detector`, the row
-/// fit and a fresh tracker, each frame's search narrowed by the tracker's prediction as the
-/// node's pipeline does ([`crate::pipeline::NarrowSearch`]); `det` holds the last frame's
-/// detection. Returns `n`.
+/// Runs `img` as `n` frames at 15 fps of a robot standing still through the perception
+/// step (the detector, the row fit and a fresh tracker), each frame's search narrowed by
+/// the tracker's prediction as the node's pipeline does
+/// ([`crate::perception::NarrowSearch`]); `det` holds the last frame's detection.
 fn detect_tracked(
-    cal: &Calibration,
-    detector: &mut Detector,
+    perception: &mut Perception,
     det: &mut Detection,
     img: &Decoded,
     n: usize,
 ) -> Result<usize, String> {
-    let mut guidance =
-        Guidance::new(GuidanceOptions::default(), cal.mounting).map_err(|e| e.to_string())?;
-    let mut fit = RowFit::new(cal.mounting, RowFitOptions::default());
-    let narrow = crate::pipeline::NarrowSearch::new(cal.mounting);
+    perception.reset().map_err(|e| e.to_string())?;
     let mut frame = Frame {
         seq: 0,
         capture_ns: 0,
@@ -303,28 +303,20 @@ fn detect_tracked(
         data: img.data.clone(),
         truth: None,
     };
-    let (mut prior, mut tilt) = (None, 0.0);
     for k in 0..n {
         frame.seq = k as u64;
         frame.capture_ns = k as u64 * 66_666_667;
         frame.receive_ns = frame.capture_ns;
-        let view = frame.view().map_err(|e| e.to_string())?;
-        detector
-            .process_with_prior(&view, prior.as_ref(), det)
-            .map_err(|e| e.to_string())?;
-        let mut est = Estimate::from_detection(&frame, det, 0.0, 0.3);
-        est.row_fit = fit.measure_detection(det, detector.points());
-        est.apply_guidance(&mut guidance);
-        tilt = est.tilt_rad.unwrap_or(tilt);
-        prior = narrow.prior(&est, tilt);
+        perception.process(&frame).map_err(|e| e.to_string())?;
     }
+    det.clone_from(perception.detection());
     Ok(n)
 }
 
 /// Detects and scores one image into `o`; an error names what was wrong.
 fn score_one(
     opts: &RealEvalOptions,
-    detector: &mut Detector,
+    perception: &mut Perception,
     det: &mut Detection,
     path: &Path,
     o: &mut RealOutcome,
@@ -348,18 +340,21 @@ fn score_one(
     .map_err(|e| e.to_string())?;
     o.labelled_rows = labels.len();
     let t0 = Instant::now();
-    detector
+    perception
+        .detector_mut()
         .preparer_mut()
         .refind_fov(&view)
         .map_err(|e| format!("{}: {e}", path.display()))?;
     let frames = match opts.track_frames {
-        0 => detector
+        0 => perception
+            .detector_mut()
             .process(&view, det)
             .map(|_| 1)
             .map_err(|e| e.to_string()),
-        n => detect_tracked(&opts.calibration, detector, det, &img, n),
+        n => detect_tracked(perception, det, &img, n),
     }
     .map_err(|e| format!("{}: {e}", path.display()))?;
+    let detector = perception.detector_mut();
     o.detect_ms = t0.elapsed().as_secs_f64() * 1e3 / frames as f64;
     let cal = detector
         .view_calibration()
