@@ -37,7 +37,7 @@ impl Notifier {
                 std::env::var("WATCHDOG_PID")
                     .ok()
                     .and_then(|p| p.parse::<u32>().ok())
-                    .map_or(true, |p| p == std::process::id())
+                    .is_none_or(|p| p == std::process::id())
             })
             .map(Duration::from_micros);
         let sock = match std::env::var("NOTIFY_SOCKET") {

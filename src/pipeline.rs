@@ -744,7 +744,7 @@ fn run_publisher(
             out.publish(sh, d);
         }
         if sh.source_state() == SourceState::Lost
-            && last_lost.map_or(true, |t| t.elapsed() >= Duration::from_secs(1))
+            && last_lost.is_none_or(|t| t.elapsed() >= Duration::from_secs(1))
         {
             last_lost = Some(Instant::now());
             out.camera_lost(sh);

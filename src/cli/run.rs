@@ -388,7 +388,7 @@ pub fn run(args: RunArgs, record_to: Option<PathBuf>) -> anyhow::Result<ExitCode
             was_alive = alive;
         }
         if let Some(every) = watchdog_every {
-            if alive && last_watchdog.map_or(true, |t| t.elapsed() >= every) {
+            if alive && last_watchdog.is_none_or(|t| t.elapsed() >= every) {
                 notifier.watchdog();
                 last_watchdog = Some(Instant::now());
             }

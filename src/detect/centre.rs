@@ -108,7 +108,7 @@ pub(super) fn strongest_either_side(
             continue;
         }
         let side = &mut sides[usize::from(d >= 0.0)];
-        if side.map_or(true, |(best, _, _)| support > best) {
+        if side.is_none_or(|(best, _, _)| support > best) {
             *side = Some((support, d, id));
         }
     }

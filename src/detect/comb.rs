@@ -117,7 +117,7 @@ pub fn fit_peak_comb(peaks: &[(f64, f64)], search: &CombSearch) -> Option<Profil
     while period <= search.max_period {
         for &(_, anchor) in peaks {
             let (c, n) = score(peaks, period, anchor, tol);
-            if n >= search.min_teeth && best.map_or(true, |b| c > b.contrast) {
+            if n >= search.min_teeth && best.is_none_or(|b| c > b.contrast) {
                 best = Some(ProfileComb {
                     period,
                     phase: anchor,

@@ -23,6 +23,7 @@ use super::vanishing::{VanishingParams, VanishingStage};
 use crate::camera::{Calibration, Mounting};
 use crate::frame::ImageView;
 use nalgebra::Vector3;
+use std::any::Any;
 use std::time::{Duration, Instant};
 
 /// What a prior on the vanishing point did in the last image
@@ -168,12 +169,14 @@ impl Detector {
             vanish: &mut self.vanish,
             window,
             fresh,
+            out,
+            weights: &mut self.weights,
         };
         let t1 = Instant::now();
-        self.method.rows(&mut frame, out, &mut self.weights)?;
+        self.method.rows(&mut frame)?;
         let t2 = Instant::now();
-        frame.vanish.run(Some(&self.weights), out)?;
-        self.method.finish(&mut frame, out, &self.weights)?;
+        frame.vanish.run(Some(frame.weights), frame.out)?;
+        self.method.finish(&mut frame)?;
         let ht = out
             .vanishing_point
             .map(|v| heading_tilt(&v.direction, &self.mounting));
@@ -190,13 +193,15 @@ impl Detector {
     }
 
     /// The method that runs, as its own type (`None` for another), for its diagnostics.
-    pub fn method_as<M: RowMethod + 'static>(&self) -> Option<&M> {
-        self.method.as_any().downcast_ref()
+    pub fn method_as<M: RowMethod>(&self) -> Option<&M> {
+        let method: &dyn Any = &*self.method;
+        method.downcast_ref()
     }
 
     /// As [`Self::method_as`], mutably.
-    pub fn method_as_mut<M: RowMethod + 'static>(&mut self) -> Option<&mut M> {
-        self.method.as_any_mut().downcast_mut()
+    pub fn method_as_mut<M: RowMethod>(&mut self) -> Option<&mut M> {
+        let method: &mut dyn Any = &mut *self.method;
+        method.downcast_mut()
     }
 
     pub fn preparer(&self) -> &Preparer {

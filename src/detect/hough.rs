@@ -480,7 +480,7 @@ impl HoughRows {
     /// Whether cell (θ column k, φ cell j) may hold a row of the window (always without one).
     #[inline]
     fn in_window(&self, k: usize, j: usize) -> bool {
-        self.window.as_ref().map_or(true, |w| {
+        self.window.as_ref().is_none_or(|w| {
             self.cell_normal(k, j).dot(&w.vp).abs() < w.sin_peak
         })
     }

@@ -564,7 +564,7 @@ impl PencilRows {
                 let x = self.smooth[i];
                 if x >= self.smooth[i - 1]
                     && x > self.smooth[i + 1]
-                    && best.map_or(true, |b| x > self.smooth[b])
+                    && best.is_none_or(|b| x > self.smooth[b])
                 {
                     best = Some(i);
                 }

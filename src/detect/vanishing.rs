@@ -405,15 +405,10 @@ impl VanishingStage {
         Ok(r)
     }
 
-    /// The finder on other rows or weights, with its own inlier flags (a method's
+    /// The finder, for other rows or weights with their own inlier flags (a method's
     /// candidates), leaving the last run's inliers as they are.
-    pub fn find(
-        &mut self,
-        rows: &[Row],
-        weights: &[f64],
-        inliers: &mut Vec<bool>,
-    ) -> Result<VanishingResult, DetectError> {
-        self.finder.find(rows, weights, inliers)
+    pub fn finder_mut(&mut self) -> &mut VanishingFinder {
+        &mut self.finder
     }
 
     /// Per row of the last run: whether it agrees with the vanishing point.

@@ -57,7 +57,7 @@ impl Motion {
         if !(odom.speed_mps.is_finite() && odom.yaw_rate_rps.is_finite()) {
             return false;
         }
-        if self.latest.map_or(true, |l| l.stamp_ns <= odom.stamp_ns) {
+        if self.latest.is_none_or(|l| l.stamp_ns <= odom.stamp_ns) {
             self.latest = Some(odom);
         }
         true

@@ -810,7 +810,7 @@ impl<R: Read + Seek> Salvage<R> {
             match record {
                 Record::ChunkIndex(c) => {
                     let end = c.chunk_start_offset.checked_add(c.chunk_length);
-                    if c.chunk_start_offset < 8 || end.map_or(true, |e| e > start) {
+                    if c.chunk_start_offset < 8 || end.is_none_or(|e| e > start) {
                         failed.get_or_insert_with(|| {
                             format!(
                                 "a chunk index entry outside the data section (offset {})",

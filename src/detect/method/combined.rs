@@ -11,8 +11,7 @@
 //! where they pass the robot, and the Hough rows published as the crop rows' centre lines
 //! with their widths from the boundaries ([`CentreLines`]).
 
-use super::hough::hough_rows;
-use super::{Frame, RowMethod};
+use super::{hough_rows, Frame, RowMethod};
 use crate::detect::boundaries::Boundaries;
 use crate::detect::centre::CentreLines;
 use crate::detect::combine::{consensus_score, PrecisionRefit, REFERENCE_PAIR_MAX_DEG};
@@ -23,7 +22,6 @@ use crate::detect::types::{DetectError, Detection, Method};
 use crate::detect::vanishing::REFINE_ITERATIONS;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
-use std::any::Any;
 
 /// `[detector.combined]`: the combined method's option.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -105,13 +103,8 @@ impl CombinedMethod {
     /// rows of either method within the inlier tolerance of it become the inliers (iterated
     /// with the vote's weights, as the vanishing stage does) and `out` takes its vanishing
     /// point. `self.inliers` holds the inliers either way.
-    fn consensus(
-        &mut self,
-        frame: &mut Frame<'_>,
-        out: &mut Detection,
-        weights: &[f64],
-        sin_tol: f64,
-    ) -> Result<(), DetectError> {
+    fn consensus(&mut self, frame: &mut Frame<'_>, sin_tol: f64) -> Result<(), DetectError> {
+        let (out, weights) = (&mut *frame.out, &*frame.weights);
         let Some(vote) = out.vanishing_point else {
             return Ok(());
         };
@@ -123,7 +116,7 @@ impl CombinedMethod {
                 self.candidate_weights
                     .push(if r.method == only { w } else { 0.0 });
             }
-            let r = frame.vanish.find(
+            let r = frame.vanish.finder_mut().find(
                 &out.rows,
                 &self.candidate_weights,
                 &mut self.candidate_inliers,
@@ -185,23 +178,15 @@ impl CombinedMethod {
 }
 
 impl RowMethod for CombinedMethod {
-    fn method(&self) -> Method {
-        Method::Combined
-    }
-
-    fn rows(
-        &mut self,
-        frame: &mut Frame<'_>,
-        out: &mut Detection,
-        weights: &mut Vec<f64>,
-    ) -> Result<(), DetectError> {
-        hough_rows(&mut self.transform, frame, out)?;
+    fn rows(&mut self, frame: &mut Frame<'_>) -> Result<(), DetectError> {
+        hough_rows(&mut self.transform, frame)?;
         if frame.fresh {
             self.boundaries
                 .run(frame.prep, frame.prepared.setup_rebuilt)?;
         }
         let w = self.edge_weight;
         let (hough_w, edge_w) = (1.0 - w, w);
+        let (out, weights) = (&mut *frame.out, &mut *frame.weights);
         weights.clear();
         for r in out.rows.iter() {
             weights.push(hough_w * r.support as f64);
@@ -213,16 +198,12 @@ impl RowMethod for CombinedMethod {
         Ok(())
     }
 
-    fn finish(
-        &mut self,
-        frame: &mut Frame<'_>,
-        out: &mut Detection,
-        weights: &[f64],
-    ) -> Result<(), DetectError> {
+    fn finish(&mut self, frame: &mut Frame<'_>) -> Result<(), DetectError> {
         let sin_tol = frame.vanish.params().inlier_deg.to_radians().sin();
         self.inliers.clear();
         self.inliers.extend_from_slice(frame.vanish.inliers());
-        self.consensus(frame, out, weights, sin_tol)?;
+        self.consensus(frame, sin_tol)?;
+        let out = &mut *frame.out;
         self.refit.run(
             out,
             &self.inliers,
@@ -240,13 +221,5 @@ impl RowMethod for CombinedMethod {
         self.centre
             .publish_detection(out, sin_tol, self.pair_max_rad, &p.rays, &p.weights);
         Ok(())
-    }
-
-    fn as_any(&self) -> &dyn Any {
-        self
-    }
-
-    fn as_any_mut(&mut self) -> &mut dyn Any {
-        self
     }
 }

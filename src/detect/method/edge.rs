@@ -14,8 +14,8 @@ use crate::detect::chords::{Bend, ChordBend};
 use crate::detect::combine::{PrecisionRefit, REFERENCE_PAIR_MAX_DEG};
 use crate::detect::edge::EdgeOptions;
 use crate::detect::refit::{turn_to_feet, NEAR_MIN_SIGMA};
-use crate::detect::types::{DetectError, Detection, Method, Row};
-use std::any::Any;
+use crate::detect::types::{DetectError, Detection, Row};
+use crate::detect::vanishing::support_weights;
 
 /// The edge rows turned by a bend are kept when this many times more of their support
 /// passes through their vanishing point than the chords' did.
@@ -136,11 +136,8 @@ impl EdgeMethod {
     /// the boundaries' great circles is not the row's centre line: the boundaries are each
     /// off by their own edge's bias, and the angle halfway between two lines on the ground
     /// is not the line halfway between them.
-    fn refit_centre_lines(
-        &mut self,
-        frame: &mut Frame<'_>,
-        out: &mut Detection,
-    ) -> Result<(), DetectError> {
+    fn refit_centre_lines(&mut self, frame: &mut Frame<'_>) -> Result<(), DetectError> {
+        let out = &mut *frame.out;
         let Some(vp) = out.vanishing_point.map(|v| v.direction) else {
             return Ok(());
         };
@@ -156,50 +153,25 @@ impl EdgeMethod {
 }
 
 impl RowMethod for EdgeMethod {
-    fn method(&self) -> Method {
-        Method::Edge
-    }
-
-    fn rows(
-        &mut self,
-        frame: &mut Frame<'_>,
-        out: &mut Detection,
-        weights: &mut Vec<f64>,
-    ) -> Result<(), DetectError> {
+    fn rows(&mut self, frame: &mut Frame<'_>) -> Result<(), DetectError> {
         if frame.fresh {
             self.boundaries
                 .run(frame.prep, frame.prepared.setup_rebuilt)?;
             self.bend(frame)?;
         }
-        weights.clear();
-        for r in &self.boundaries.rows {
-            weights.push(r.support as f64);
-            out.rows.push(*r);
-        }
+        frame.out.rows.extend_from_slice(&self.boundaries.rows);
+        support_weights(&frame.out.rows, frame.weights);
         Ok(())
     }
 
-    fn finish(
-        &mut self,
-        frame: &mut Frame<'_>,
-        out: &mut Detection,
-        _weights: &[f64],
-    ) -> Result<(), DetectError> {
+    fn finish(&mut self, frame: &mut Frame<'_>) -> Result<(), DetectError> {
         self.inliers.clear();
         self.inliers.extend_from_slice(frame.vanish.inliers());
-        self.refit.run(out, &self.inliers, None, &[]);
+        self.refit.run(frame.out, &self.inliers, None, &[]);
         let sin_tol = frame.vanish.params().inlier_deg.to_radians().sin();
         let p = frame.points;
         self.centre
-            .publish_detection(out, sin_tol, self.pair_max_rad, &p.rays, &p.weights);
-        self.refit_centre_lines(frame, out)
-    }
-
-    fn as_any(&self) -> &dyn Any {
-        self
-    }
-
-    fn as_any_mut(&mut self) -> &mut dyn Any {
-        self
+            .publish_detection(frame.out, sin_tol, self.pair_max_rad, &p.rays, &p.weights);
+        self.refit_centre_lines(frame)
     }
 }

@@ -20,6 +20,7 @@ pub mod hough;
 pub mod pencil;
 pub mod strips;
 
+use super::hough::{HoughResult, HoughRows};
 use super::prepare::{Points, PrepareResult, Preparer};
 use super::types::{DetectError, Detection, Method};
 use super::vanishing::VanishingStage;
@@ -40,44 +41,33 @@ pub struct Frame<'a> {
     /// The window around a predicted vanishing point the rows must pass through (unit
     /// direction, camera frame; half-width, radians), if any.
     pub window: Option<(Vector3<f64>, f64)>,
+    /// The frame's detection: the method's rows (cleared before it runs), then the vote's
+    /// vanishing point and quality, then the method's final answer.
+    pub out: &'a mut Detection,
+    /// Each row's weight in the vote for the vanishing point (one per row).
+    pub weights: &'a mut Vec<f64>,
     /// False when the method already ran on these points (the full search after a narrowed
     /// one): evidence that does not depend on the window (the edge detector's boundaries)
     /// is kept from that run.
     pub fresh: bool,
 }
 
-/// A row-detection method.
-pub trait RowMethod: Send + std::fmt::Debug {
-    /// Which method this is.
-    fn method(&self) -> Method;
-
+/// A row-detection method. As `Any`, a method can be reached as its own type for its
+/// diagnostics ([`super::Detector::method_as`]).
+pub trait RowMethod: Any + Send + std::fmt::Debug {
     /// Whether the method's search can be narrowed to a window around a predicted
     /// vanishing point; one that cannot always searches everywhere.
     fn narrows(&self) -> bool {
         true
     }
 
-    /// The frame's rows into `out.rows` (cleared by the caller), and each row's weight in
-    /// the vote for the vanishing point into `weights` (one per row).
-    fn rows(
-        &mut self,
-        frame: &mut Frame<'_>,
-        out: &mut Detection,
-        weights: &mut Vec<f64>,
-    ) -> Result<(), DetectError>;
+    /// The frame's rows into `frame.out.rows` (cleared by the caller), and each row's
+    /// weight in the vote for the vanishing point into `frame.weights`.
+    fn rows(&mut self, frame: &mut Frame<'_>) -> Result<(), DetectError>;
 
-    /// After the vote (`out` holds its vanishing point and quality, `weights` the rows'
-    /// weights in it): the method's own refinement of the rows and the vanishing point.
-    fn finish(
-        &mut self,
-        frame: &mut Frame<'_>,
-        out: &mut Detection,
-        weights: &[f64],
-    ) -> Result<(), DetectError>;
-
-    /// The method as `Any`, for its own diagnostics ([`super::Detector::method_as`]).
-    fn as_any(&self) -> &dyn Any;
-    fn as_any_mut(&mut self) -> &mut dyn Any;
+    /// After the vote (`frame.out` holds its vanishing point and quality): the method's own
+    /// refinement of the rows and the vanishing point.
+    fn finish(&mut self, frame: &mut Frame<'_>) -> Result<(), DetectError>;
 }
 
 /// Fields of view narrower than this extent (radians, the square root of the solid angle:
@@ -99,4 +89,23 @@ pub fn choose(extent_rad: f64, m: &Mounting) -> Method {
     } else {
         Method::Pencil
     }
+}
+
+/// The Hough transform's rows of the frame into `frame.out.rows`, refitted on the image's
+/// pixels in wedges towards the vanishing point of the rows as found: the stage the Hough
+/// and the combined methods share.
+pub fn hough_rows(
+    transform: &mut HoughRows,
+    frame: &mut Frame<'_>,
+) -> Result<HoughResult, DetectError> {
+    transform.set_window(frame.window.as_ref().map(|(v, w)| (v, *w)));
+    let (p, out) = (frame.points, &mut *frame.out);
+    let found = transform.find_rows(&p.rays, &p.weights, &mut out.rows)?;
+    // A first vanishing point from the rows shapes the refit's bands.
+    frame.vanish.run(None, out)?;
+    let vp = out.vanishing_point.map(|v| v.direction);
+    frame
+        .prep
+        .refit(&mut out.rows, transform.bands(), vp.as_ref())?;
+    Ok(found)
 }

@@ -11,8 +11,8 @@
 use super::{Frame, RowMethod};
 use crate::camera::Mounting;
 use crate::detect::pencil::{PencilOptions, PencilResult, PencilRows};
-use crate::detect::types::{DetectError, Detection, Method};
-use std::any::Any;
+use crate::detect::types::DetectError;
+use crate::detect::vanishing::support_weights;
 
 /// The pencil method.
 #[derive(Debug, Clone)]
@@ -42,43 +42,20 @@ impl PencilMethod {
 }
 
 impl RowMethod for PencilMethod {
-    fn method(&self) -> Method {
-        Method::Pencil
-    }
-
     fn narrows(&self) -> bool {
         false
     }
 
-    fn rows(
-        &mut self,
-        frame: &mut Frame<'_>,
-        out: &mut Detection,
-        weights: &mut Vec<f64>,
-    ) -> Result<(), DetectError> {
+    fn rows(&mut self, frame: &mut Frame<'_>) -> Result<(), DetectError> {
         let p = frame.points;
         self.last = self
             .pencil
-            .find(&p.rays, &p.weights, &p.pixel_rad, &mut out.rows)?;
-        weights.clear();
-        weights.extend(out.rows.iter().map(|r| r.support as f64));
+            .find(&p.rays, &p.weights, &p.pixel_rad, &mut frame.out.rows)?;
+        support_weights(&frame.out.rows, frame.weights);
         Ok(())
     }
 
-    fn finish(
-        &mut self,
-        _frame: &mut Frame<'_>,
-        _out: &mut Detection,
-        _weights: &[f64],
-    ) -> Result<(), DetectError> {
+    fn finish(&mut self, _frame: &mut Frame<'_>) -> Result<(), DetectError> {
         Ok(())
-    }
-
-    fn as_any(&self) -> &dyn Any {
-        self
-    }
-
-    fn as_any_mut(&mut self) -> &mut dyn Any {
-        self
     }
 }

@@ -12,9 +12,9 @@ use crate::detect::polish::Polish;
 use crate::detect::strips::{
     StripsOptions, StripsResult, StripsRows, REFERENCE_POLISH_MAX_BAND_DEG,
 };
-use crate::detect::types::{DetectError, Detection, Method};
+use crate::detect::types::DetectError;
+use crate::detect::vanishing::support_weights;
 use nalgebra::Vector3;
-use std::any::Any;
 
 /// The strips method.
 #[derive(Debug, Clone)]
@@ -58,33 +58,19 @@ impl StripsMethod {
 }
 
 impl RowMethod for StripsMethod {
-    fn method(&self) -> Method {
-        Method::Strips
-    }
-
-    fn rows(
-        &mut self,
-        frame: &mut Frame<'_>,
-        out: &mut Detection,
-        weights: &mut Vec<f64>,
-    ) -> Result<(), DetectError> {
+    fn rows(&mut self, frame: &mut Frame<'_>) -> Result<(), DetectError> {
         self.strips
             .set_window(frame.window.as_ref().map(|(v, w)| (v, *w)));
         let p = frame.points;
         self.found = self
             .strips
-            .find(&p.rays, &p.weights, &p.pixel_rad, &mut out.rows)?;
-        weights.clear();
-        weights.extend(out.rows.iter().map(|r| r.support as f64));
+            .find(&p.rays, &p.weights, &p.pixel_rad, &mut frame.out.rows)?;
+        support_weights(&frame.out.rows, frame.weights);
         Ok(())
     }
 
-    fn finish(
-        &mut self,
-        frame: &mut Frame<'_>,
-        out: &mut Detection,
-        _weights: &[f64],
-    ) -> Result<(), DetectError> {
+    fn finish(&mut self, frame: &mut Frame<'_>) -> Result<(), DetectError> {
+        let out = &mut *frame.out;
         self.polish
             .run(frame.prep, frame.vanish, out, self.max_band_rad)?;
         if let (None, Some(v), false) = (out.vanishing_point, self.found, out.rows.is_empty()) {
@@ -93,13 +79,5 @@ impl RowMethod for StripsMethod {
             out.quality = self.strips.last().comb_strength.clamp(0.0, 1.0);
         }
         Ok(())
-    }
-
-    fn as_any(&self) -> &dyn Any {
-        self
-    }
-
-    fn as_any_mut(&mut self) -> &mut dyn Any {
-        self
     }
 }

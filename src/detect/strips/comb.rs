@@ -181,7 +181,6 @@ fn distinct_strips(on: &[u32]) -> usize {
 #[cfg(test)]
 mod tests {
     use super::super::testing::*;
-    use super::super::{StripsOptions, StripsRows};
     use super::*;
     use nalgebra::{Rotation3, Vector3};
 
@@ -198,11 +197,8 @@ mod tests {
             .collect();
         let heading = 3f64.to_radians();
         let fld = field_at(300.0, 512.0, &m, &ys, heading);
-        let mut s = StripsRows::new(StripsOptions::default(), 15.0, &m).unwrap();
-        let mut rows = Vec::new();
-        s.find(&fld.rays, &fld.weights, &fld.pixel_rad, &mut rows)
-            .unwrap()
-            .expect("a vanishing point");
+        let (mut s, vp, rows) = detect(&fld, &m);
+        vp.expect("a vanishing point");
         assert!(rows.len() >= 4, "{} rows", rows.len());
         for r in &rows {
             let e = nearest(&r.normal, &fld.normals);
@@ -242,11 +238,8 @@ mod tests {
         // `MIN_STRIPS` strips, and need fewer
         let m = forward_camera();
         let fld = field(300.0, 512.0, &m, 0.75, 0.1, -4f64.to_radians());
-        let mut s = StripsRows::new(StripsOptions::default(), 15.0, &m).unwrap();
-        let mut rows = Vec::new();
-        s.find(&fld.rays, &fld.weights, &fld.pixel_rad, &mut rows)
-            .unwrap()
-            .expect("a vanishing point");
+        let (s, vp, rows) = detect(&fld, &m);
+        vp.expect("a vanishing point");
         for r in &rows {
             let e = nearest(&r.normal, &fld.normals);
             assert!(e < 2.5 / 300.0, "a row {e} rad off");
@@ -276,10 +269,7 @@ mod tests {
             fld.weights.push(1.0);
             fld.pixel_rad.push(((-r.z).powf(1.5) / 300.0) as f32);
         }
-        let mut s = StripsRows::new(StripsOptions::default(), 15.0, &m).unwrap();
-        let mut rows = Vec::new();
-        s.find(&fld.rays, &fld.weights, &fld.pixel_rad, &mut rows)
-            .unwrap();
+        let (_, _, rows) = detect(&fld, &m);
         assert!(rows.len() >= 3);
         // each published row lies on a true row where that row is in the image
         let lines: Vec<_> = (-8..=8)

@@ -293,12 +293,8 @@ mod tests {
     fn rows_and_vanishing_point_of_a_flat_field() {
         let m = forward_camera();
         let fld = field(300.0, 512.0, &m, 0.5, 0.1, 5f64.to_radians());
-        let mut s = StripsRows::new(StripsOptions::default(), 15.0, &m).unwrap();
-        let mut rows = Vec::new();
-        let vp = s
-            .find(&fld.rays, &fld.weights, &fld.pixel_rad, &mut rows)
-            .unwrap()
-            .expect("a vanishing point");
+        let (_, vp, rows) = detect(&fld, &m);
+        let vp = vp.expect("a vanishing point");
         let cam_from_robot = m.robot_from_camera().inverse();
         let yaw = Rotation3::from_axis_angle(&Vector3::z_axis(), 5f64.to_radians());
         let truth = cam_from_robot * (yaw * Vector3::x());

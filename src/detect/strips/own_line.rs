@@ -79,7 +79,6 @@ impl StripsRows {
 #[cfg(test)]
 mod tests {
     use super::super::testing::*;
-    use super::super::{StripsOptions, StripsRows};
 
     #[test]
     fn a_row_turned_off_the_common_point_gets_its_own_line() {
@@ -93,12 +92,8 @@ mod tests {
         fld.pixel_rad.extend(&turned.pixel_rad);
         // the row up to 10 m ahead, where the robot steers
         let line = centre_line(300.0, 512.0, &m, 0.0, 0.6f64.to_radians(), 10.0);
-        let mut s = StripsRows::new(StripsOptions::default(), 15.0, &m).unwrap();
-        let mut rows = Vec::new();
-        let vp = s
-            .find(&fld.rays, &fld.weights, &fld.pixel_rad, &mut rows)
-            .unwrap()
-            .expect("a vanishing point");
+        let (_, vp, rows) = detect(&fld, &m);
+        let vp = vp.expect("a vanishing point");
         assert_eq!(rows.len(), 5);
         let row = rows
             .iter()

@@ -212,7 +212,6 @@ fn prominence(sm: &[f64], i: usize, win: usize) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::super::testing::*;
-    use super::super::{StripsOptions, StripsRows};
     use super::*;
     use nalgebra::Vector3;
 
@@ -279,10 +278,7 @@ mod tests {
             .filter(|(y, _)| **y < -0.3)
             .map(|(_, n)| *n)
             .collect();
-        let mut s = StripsRows::new(StripsOptions::default(), 15.0, &m).unwrap();
-        let mut rows = Vec::new();
-        s.find(&fld.rays, &fld.weights, &fld.pixel_rad, &mut rows)
-            .unwrap();
+        let (_, _, rows) = detect(&fld, &m);
         let found = bare
             .iter()
             .filter(|t| {
@@ -297,11 +293,8 @@ mod tests {
     fn rows_slanting_across_the_strips_are_found_once_straightened() {
         let m = forward_camera();
         let fld = field(300.0, 512.0, &m, 0.5, 0.2, 2f64.to_radians());
-        let mut s = StripsRows::new(StripsOptions::default(), 15.0, &m).unwrap();
-        let mut rows = Vec::new();
-        s.find(&fld.rays, &fld.weights, &fld.pixel_rad, &mut rows)
-            .unwrap()
-            .expect("a vanishing point");
+        let (mut s, vp, rows) = detect(&fld, &m);
+        vp.expect("a vanishing point");
         for r in &rows {
             let e = nearest(&r.normal, &fld.normals);
             assert!(e < 2.5 / 300.0, "a row {e} rad off");

@@ -385,11 +385,8 @@ mod tests {
     #[test]
     fn the_coarse_grid_finds_the_full_grids_best_for_a_third_of_the_work() {
         let (m, fld) = weedy_field();
-        let mut s = StripsRows::new(StripsOptions::default(), 15.0, &m).unwrap();
-        let mut rows = Vec::new();
-        s.find(&fld.rays, &fld.weights, &fld.pixel_rad, &mut rows)
-            .unwrap()
-            .expect("a vanishing point");
+        let (mut s, vp, _) = detect(&fld, &m);
+        vp.expect("a vanishing point");
         // the search's peaks and window
         s.read_peaks(None);
         let bx = s.window().unwrap();

@@ -1,8 +1,21 @@
 //! Test fields for the strips method: flat fields of crop rows seen by a pinhole camera,
 //! and the measures of how far rows found lie from the true ones.
 
+use super::{StripsOptions, StripsRows};
 use crate::camera::Mounting;
+use crate::detect::types::Row;
 use nalgebra::{Rotation3, Vector3};
+
+/// The strips method with its defaults (tilt within 15°) on `fld` seen from `m`: the method
+/// after the search, the vanishing point and the rows.
+pub fn detect(fld: &Field, m: &Mounting) -> (StripsRows, Option<Vector3<f64>>, Vec<Row>) {
+    let mut s = StripsRows::new(StripsOptions::default(), 15.0, m).unwrap();
+    let mut rows = Vec::new();
+    let vp = s
+        .find(&fld.rays, &fld.weights, &fld.pixel_rad, &mut rows)
+        .unwrap();
+    (s, vp, rows)
+}
 
 /// A flat field seen by a pinhole of focal length `f` (pixels) on a `size`² image,
 /// mounted as `m`, the rows `spacing` apart turned by `heading` (radians): plant points
