@@ -117,7 +117,6 @@ fn bench(c: &mut Criterion) {
             &work,
             &opts.mask,
             opts.max_tilt_deg,
-            None,
             &mut mask,
             &mut rays,
             &mut solid,

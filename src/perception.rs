@@ -132,14 +132,6 @@ impl Measurement {
             .as_mut()?
             .measure_detection(det, self.detector.points())
     }
-
-    pub fn detector(&self) -> &Detector {
-        &self.detector
-    }
-
-    pub fn detector_mut(&mut self) -> &mut Detector {
-        &mut self.detector
-    }
 }
 
 /// The half of the step that must see the frames in order: row guidance, and the prior its

@@ -5,9 +5,7 @@
 //! preparation's setup is rebuilt), and its rows, the boundary lines, of the last frame. The
 //! stage the edge and the combined methods share.
 
-use super::edge::{
-    EdgeDetector, EdgeError, EdgeOptions, EdgeParams, EdgeResult, REFERENCE_MAX_ANGLE_RAD,
-};
+use super::edge::{EdgeDetector, EdgeError, EdgeOptions, EdgeParams, REFERENCE_MAX_ANGLE_RAD};
 use super::prepare::Preparer;
 use super::types::{DetectError, Row};
 
@@ -28,7 +26,6 @@ pub struct Boundaries {
     detector: Option<EdgeDetector>,
     /// The boundary lines of the last frame.
     pub rows: Vec<Row>,
-    last: EdgeResult,
 }
 
 impl Boundaries {
@@ -41,7 +38,6 @@ impl Boundaries {
             params,
             detector: None,
             rows: Vec::with_capacity(64),
-            last: EdgeResult::default(),
         })
     }
 
@@ -49,7 +45,6 @@ impl Boundaries {
     /// rebuilt for it).
     pub fn run(&mut self, prep: &Preparer, rebuilt: bool) -> Result<(), DetectError> {
         self.rows.clear();
-        self.last = EdgeResult::default();
         let (_, smoothed) = prep.vegetation();
         let (w, h) = (smoothed.width, smoothed.height);
         let (Some(cal), Some((mask, _))) = (prep.working_calibration(), prep.mask()) else {
@@ -67,23 +62,12 @@ impl Boundaries {
         let Some(edge) = self.detector.as_mut() else {
             return Err(DetectError::Buffer("edge method: no setup".into()));
         };
-        self.last = edge.process(&smoothed.data, mask, &mut self.rows)?;
+        edge.process(&smoothed.data, mask, &mut self.rows)?;
         Ok(())
-    }
-
-    /// What the edge detector did in the last frame.
-    pub fn last(&self) -> EdgeResult {
-        self.last
     }
 
     /// The edge detector (once it ran) beside the rows it found, the rows to change.
     pub fn parts_mut(&mut self) -> (Option<&EdgeDetector>, &mut Vec<Row>) {
         (self.detector.as_ref(), &mut self.rows)
-    }
-
-    /// The edge detector's state after the last frame (edges, chains, sections), once it
-    /// ran.
-    pub fn detector(&self) -> Option<&EdgeDetector> {
-        self.detector.as_ref()
     }
 }

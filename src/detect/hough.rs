@@ -65,15 +65,6 @@ pub const REFERENCE_MIN_TOLERANCE_DEG: f64 = 0.15;
 /// Refined rows closer than this (degrees between normals) at the reference angular
 /// resolution are one row.
 pub const REFERENCE_MERGE_ANGLE_DEG: f64 = 1.0;
-/// Peaks below this fraction of the highest peak are dropped.
-const MIN_PEAK_FRACTION: f64 = 0.1;
-/// Half-size (cells) of the non-maximum-suppression window.
-const NMS_RADIUS: usize = 2;
-/// Iterations of the refinement fit.
-const REFINE_ITERATIONS: usize = 6;
-/// A row whose points do not single out a great circle (ratio of the two smallest
-/// eigenvalues of their scatter matrix above this) is dropped.
-const MAX_DEGENERACY: f64 = 0.2;
 
 /// The transform's parameters: the options, and the angular scales the calibration's
 /// field of view sets ([`super::scale`]).
@@ -92,6 +83,15 @@ pub struct HoughParams {
     /// and the peaks need fewer points than the fits do. `min_support` counts in kept
     /// points: a peak needs `min_support / stride` votes. 3000.
     pub vote_points: usize,
+    /// Peaks below this fraction of the highest peak are dropped (0.1).
+    pub min_peak_fraction: f64,
+    /// Half-size (cells) of the non-maximum-suppression window (2).
+    pub nms_radius: usize,
+    /// Iterations of the refinement fit (6).
+    pub refine_iterations: usize,
+    /// A row whose points do not single out a great circle (ratio of the two smallest
+    /// eigenvalues of their scatter matrix above this) is dropped (0.2).
+    pub max_degeneracy: f64,
 }
 
 impl HoughParams {
@@ -105,6 +105,10 @@ impl HoughParams {
             max_rows: opts.max_rows,
             min_support: opts.min_support,
             vote_points: 3_000,
+            min_peak_fraction: 0.1,
+            nms_radius: 2,
+            refine_iterations: 6,
+            max_degeneracy: 0.2,
         }
     }
 
@@ -285,7 +289,7 @@ impl HoughRows {
             owned: Vec::new(),
             bands: Vec::with_capacity(opts.max_rows),
             nms: {
-                let r = NMS_RADIUS as isize;
+                let r = opts.nms_radius as isize;
                 let mut v: Vec<(isize, isize)> = (-r..=r)
                     .flat_map(|a| (-r..=r).map(move |b| (a, b)))
                     .filter(|&o| o != (0, 0))
@@ -307,7 +311,7 @@ impl HoughRows {
         let diag = std::f64::consts::SQRT_2 * cell;
         self.window = window.map(|(vp, w)| Window {
             vp: vp.normalize(),
-            sin_vote: (w + (NMS_RADIUS as f64 + 1.0) * diag)
+            sin_vote: (w + (self.opts.nms_radius as f64 + 1.0) * diag)
                 .min(std::f64::consts::FRAC_PI_2)
                 .sin(),
             sin_peak: (w + diag).min(std::f64::consts::FRAC_PI_2).sin(),
@@ -480,9 +484,9 @@ impl HoughRows {
     /// Whether cell (θ column k, φ cell j) may hold a row of the window (always without one).
     #[inline]
     fn in_window(&self, k: usize, j: usize) -> bool {
-        self.window.as_ref().is_none_or(|w| {
-            self.cell_normal(k, j).dot(&w.vp).abs() < w.sin_peak
-        })
+        self.window
+            .as_ref()
+            .is_none_or(|w| self.cell_normal(k, j).dot(&w.vp).abs() < w.sin_peak)
     }
 
     /// The highest cell in the window (the peaks' fraction is of the window's rows).
@@ -510,7 +514,7 @@ impl HoughRows {
             .min_support
             .div_ceil(self.vote_stride as u32)
             .max(1))
-        .max((MIN_PEAK_FRACTION * max as f64).ceil() as u32);
+        .max((self.opts.min_peak_fraction * max as f64).ceil() as u32);
         self.peaks.clear();
         for k in 0..t {
             for j in 0..p {
@@ -575,7 +579,7 @@ impl HoughRows {
         let mut n = n0;
         let mut support = 0u32;
         let mut fit = None;
-        for _ in 0..REFINE_ITERATIONS {
+        for _ in 0..self.opts.refine_iterations.max(1) {
             let s_tol = tol.sin();
             // The next bands are no wider and the normal moves less than a band: points
             // beyond twice this band are never needed again (the same rule as the first
@@ -607,7 +611,7 @@ impl HoughRows {
             tol = next;
         }
         let f = fit?;
-        if support < self.opts.min_support || f.degeneracy > MAX_DEGENERACY {
+        if support < self.opts.min_support || f.degeneracy > self.opts.max_degeneracy {
             return None;
         }
         Some((

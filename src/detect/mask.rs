@@ -1,17 +1,16 @@
-//! Which pixels may carry rows (paper II-C and III-C): the lens's field of view, the sky, and
-//! an optional user mask.
+//! Which pixels may carry rows (paper II-C and III-C): the lens's field of view and the sky.
 //!
-//! Owns three things. (1) The field-of-view mask: the calibration's circle or annulus (already
+//! Owns two things. (1) The field-of-view mask: the calibration's circle or annulus (already
 //! rescaled with it), shrunk by a margin; or, when the calibration has none, the lens's image
 //! circle found from the image itself ([`find_fov`]: the radial profile of brightness from the
 //! centre, dark outside the rim and, for a catadioptric lens, inside the blind disc). (2) The
 //! sky: rays whose elevation in the robot frame (through the mounting rotation) exceeds the
 //! largest expected tilt cannot see the ground, so they carry no rows. (On colour images the
 //! vegetation index already rejects a blue or grey sky; this geometric test also works on
-//! greyscale input.) (3) A user mask image, white = use (camera mount, robot body).
+//! greyscale input.)
 //! The per-pixel ray table the Hough stage needs is built in the same pass.
 
-use super::types::{DetectError, GreyImage};
+use super::types::DetectError;
 use crate::camera::{Calibration, FovMask};
 use crate::frame::ImageView;
 use serde::{Deserialize, Serialize};
@@ -67,7 +66,6 @@ pub fn build_mask(
     cal: &Calibration,
     opts: &MaskOptions,
     max_tilt_deg: f64,
-    user: Option<&GreyImage>,
     mask: &mut Vec<u8>,
     rays: &mut Vec<[f32; 3]>,
     solid: &mut Vec<f32>,
@@ -79,14 +77,11 @@ pub fn build_mask(
         )));
     }
     let (h, w) = (cal.model.height as usize, cal.model.width as usize);
-    if let Some(u) = user {
-        check_user_mask(u, w, h)?;
-    }
     // Tables of the whole working image, read every frame: on huge pages where there are.
     reset_huge(mask, w * h, 0);
     reset_huge(rays, w * h, [0.0; 3]);
     reset_huge(solid, w * h, 0.0);
-    let res = fill_tables(cal, opts, max_tilt_deg, user, mask, rays, solid);
+    let res = fill_tables(cal, opts, max_tilt_deg, mask, rays, solid);
     if res.valid == 0 {
         return Err(DetectError::Mask(format!(
             "no pixel of the {h}x{w} image is inside the field of view (mask {:?}, sky above {} deg)",
@@ -94,24 +89,6 @@ pub fn build_mask(
         )));
     }
     Ok(res)
-}
-
-/// Checks that a user mask image is not empty and has the working image's aspect (`w`×`h`).
-fn check_user_mask(u: &GreyImage, w: usize, h: usize) -> Result<(), DetectError> {
-    if u.width == 0 || u.height == 0 || u.data.len() != u.width * u.height {
-        return Err(DetectError::Mask(format!(
-            "user mask image {}x{} is empty or inconsistent",
-            u.height, u.width
-        )));
-    }
-    let (fa, fb) = (u.width as f64 / w as f64, u.height as f64 / h as f64);
-    if (fa - fb).abs() > 0.02 * fa.max(fb) {
-        return Err(DetectError::Mask(format!(
-            "user mask image {}x{} does not have the image's aspect ({}x{})",
-            u.height, u.width, h, w
-        )));
-    }
-    Ok(())
 }
 
 /// Empties `v` and fills it with `len` copies of `value`, on huge pages where there are.
@@ -137,22 +114,12 @@ fn fov_radii(fov: Option<FovMask>, margin_px: f64) -> (f64, f64) {
     }
 }
 
-/// Whether the user mask image keeps working pixel (`r`, `c`) of an `h`×`w` image (the
-/// user image's pixel under its centre is at least 128).
-fn user_keeps(u: &GreyImage, r: usize, c: usize, h: usize, w: usize) -> bool {
-    let ur = ((r as f64 + 0.5) * u.height as f64 / h as f64) as usize;
-    let uc = ((c as f64 + 0.5) * u.width as f64 / w as f64) as usize;
-    u.get(ur.min(u.height - 1), uc.min(u.width - 1)) >= 128
-}
-
 /// Writes the mask, ray and solid-angle tables (already zeroed and sized) pixel by pixel:
-/// a pixel is used when it lies within the field of view's radii, the user mask keeps it,
-/// its ray is within the lens's range of elevations, and it is not sky.
+/// a pixel is used when it lies within the field of view's radii, its ray is within the lens's range of elevations, and it is not sky.
 fn fill_tables(
     cal: &Calibration,
     opts: &MaskOptions,
     max_tilt_deg: f64,
-    user: Option<&GreyImage>,
     mask: &mut [u8],
     rays: &mut [[f32; 3]],
     solid: &mut [f32],
@@ -175,9 +142,6 @@ fn fill_tables(
             let i = r * w + c;
             let rad = cal.radius_px(r as f64, c as f64);
             if rad < inner || rad > outer {
-                continue;
-            }
-            if user.is_some_and(|u| !user_keeps(u, r, c, h, w)) {
                 continue;
             }
             let ray = cal.model.cam2world(r as f64, c as f64);
@@ -329,7 +293,7 @@ fn blind_disc_radius(stats: &[Option<(f64, f64)>], outer: f64, flat_sd: f64) -> 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::camera::{ideal_fisheye, ideal_pal, Mounting};
+    use crate::camera::{ideal_pal, Mounting};
     use crate::frame::PixelFormat;
 
     fn ring_image(h: u32, w: u32, inner: f64, outer: f64) -> Vec<u8> {
@@ -382,7 +346,6 @@ mod tests {
             &cal,
             &MaskOptions::default(),
             15.0,
-            None,
             &mut mask,
             &mut rays,
             &mut solid,
@@ -414,7 +377,6 @@ mod tests {
             &tilted,
             &MaskOptions::default(),
             15.0,
-            None,
             &mut mask,
             &mut rays,
             &mut solid,
@@ -429,46 +391,5 @@ mod tests {
                 assert!((rot * ray).z <= 15f64.to_radians().sin() + 1e-6);
             }
         }
-    }
-
-    #[test]
-    fn user_mask_removes_pixels() {
-        let cal = ideal_fisheye(60, 80).unwrap();
-        let mut user = GreyImage::default();
-        user.resize(40, 30);
-        user.data.fill(255);
-        for r in 0..15 {
-            for c in 0..40 {
-                user.data[r * 40 + c] = 0; // top half: robot body
-            }
-        }
-        let mut mask = Vec::new();
-        let mut rays = Vec::new();
-        let mut solid = Vec::new();
-        build_mask(
-            &cal,
-            &MaskOptions::default(),
-            15.0,
-            Some(&user),
-            &mut mask,
-            &mut rays,
-            &mut solid,
-        )
-        .unwrap();
-        assert!(mask[..30 * 80].iter().all(|&m| m == 0));
-        assert!(mask[30 * 80..].iter().any(|&m| m != 0));
-        let mut bad = GreyImage::default();
-        bad.resize(10, 30);
-        bad.data.fill(255);
-        assert!(build_mask(
-            &cal,
-            &MaskOptions::default(),
-            15.0,
-            Some(&bad),
-            &mut mask,
-            &mut rays,
-            &mut solid
-        )
-        .is_err());
     }
 }

@@ -44,8 +44,8 @@ pub mod vegetation;
 
 pub use detector::{Detector, PriorOutcome, StageTimes};
 pub use options::DetectorOptions;
-pub use prepare::{Points, Preparer};
+pub use prepare::Preparer;
 pub use prior::DetectorPrior;
 #[cfg(test)]
 pub(crate) use types::noise_bytes;
-pub use types::{DetectError, Detection, GreyImage, Method, Row, VanishingPoint};
+pub use types::{DetectError, Detection, GreyImage, Method, Points, Row, VanishingPoint};

@@ -18,7 +18,7 @@
 
 use super::comb::{fit_peak_comb_rolled, CombSearch, RolledComb, TanAxis};
 use super::pose::RobotAxes;
-use super::types::{DetectError, Method, Row};
+use super::types::{DetectError, Method, Points, Row};
 use crate::camera::Mounting;
 use crate::sphere::Scatter;
 use nalgebra::Vector3;
@@ -342,22 +342,9 @@ impl PencilRows {
 
     /// The image's scales from its points (unit rays and the angular size of each ray's
     /// pixel); call before [`Self::candidate`] and [`Self::read_rows`] for each image.
-    pub fn prepare(
-        &mut self,
-        rays: &[[f32; 3]],
-        weights: &[f32],
-        pixel_rad: &[f32],
-    ) -> Result<PencilScales, DetectError> {
-        if rays.len() != weights.len() || rays.len() != pixel_rad.len() {
-            return Err(DetectError::Buffer(format!(
-                "pencil: {} rays, {} weights, {} pixel sizes",
-                rays.len(),
-                weights.len(),
-                pixel_rad.len()
-            )));
-        }
+    pub fn prepare(&mut self, rays: &[[f32; 3]], pixel_rad: &[f32]) -> PencilScales {
         self.sc = self.scales(rays, pixel_rad);
-        Ok(self.sc)
+        self.sc
     }
 
     /// The vanishing point that makes the profile sharpest: the strongest local maximum of
@@ -488,12 +475,12 @@ impl PencilRows {
     /// then [`Self::read_rows`] there.
     pub fn find(
         &mut self,
-        rays: &[[f32; 3]],
-        weights: &[f32],
-        pixel_rad: &[f32],
+        points: &Points,
         rows: &mut Vec<Row>,
     ) -> Result<PencilResult, DetectError> {
-        let scales = self.prepare(rays, weights, pixel_rad)?;
+        points.check("pencil")?;
+        let (rays, weights) = (&points.rays, &points.weights);
+        let scales = self.prepare(rays, &points.pixel_rad);
         let best = self.candidate(rays, weights);
         let mut res = PencilResult {
             scales,
@@ -846,10 +833,13 @@ mod tests {
 
     fn run(rays: &[[f32; 3]]) -> (PencilResult, Vec<Row>) {
         let mut p = PencilRows::new(PencilOptions::default(), 15.0, &Mounting::default()).unwrap();
-        let w = vec![1.0f32; rays.len()];
-        let px = vec![1.0f32 / 300.0; rays.len()];
+        let points = Points {
+            rays: rays.to_vec(),
+            weights: vec![1.0f32; rays.len()],
+            pixel_rad: vec![1.0f32 / 300.0; rays.len()],
+        };
         let mut rows = Vec::new();
-        let r = p.find(rays, &w, &px, &mut rows).unwrap();
+        let r = p.find(&points, &mut rows).unwrap();
         (r, rows)
     }
 
@@ -935,6 +925,11 @@ mod tests {
     fn mismatched_buffers_are_an_error() {
         let mut p = PencilRows::new(PencilOptions::default(), 15.0, &Mounting::default()).unwrap();
         let mut rows = Vec::new();
-        assert!(p.find(&[[0.0, 0.0, -1.0]], &[], &[1.0], &mut rows).is_err());
+        let mismatched = Points {
+            rays: vec![[0.0, 0.0, -1.0]],
+            pixel_rad: vec![1.0],
+            ..Points::default()
+        };
+        assert!(p.find(&mismatched, &mut rows).is_err());
     }
 }

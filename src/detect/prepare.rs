@@ -13,7 +13,7 @@ use super::refit::{refit_rows, Candidates, NearFoot, RefitImage, RefitOptions, R
 use super::sections::NearField;
 use super::smooth::{Gaussian, SmoothOptions};
 use super::threshold::{keep_brightest, ThresholdOptions, ThresholdResult};
-use super::types::{DetectError, GreyImage, Row};
+use super::types::{DetectError, GreyImage, Points, Row};
 use super::vegetation::{vegetation_image, working_factor, Binning, VegetationOptions};
 use crate::camera::Calibration;
 use crate::frame::{ImageView, PixelFormat};
@@ -30,18 +30,6 @@ pub struct PrepareOptions {
     pub smooth: SmoothOptions,
     pub threshold: ThresholdOptions,
     pub refit: RefitOptions,
-}
-
-/// The kept points a method reads: unit rays (camera frame) and
-/// their weights (smoothed vegetation value times the pixel's solid angle, so that fits are
-/// integrals over the sphere, free of the lens's varying pixel density).
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct Points {
-    pub rays: Vec<[f32; 3]>,
-    pub weights: Vec<f32>,
-    /// The angular size (radians) of each point's pixel: the calibration's resolution where
-    /// the point is, from which the stages' pixel scales become angles.
-    pub pixel_rad: Vec<f32>,
 }
 
 /// What the preparation stage did.
@@ -189,7 +177,6 @@ impl Preparer {
             &work_cal,
             &self.opts.mask,
             self.opts.max_tilt_deg,
-            None,
             &mut mask,
             &mut rays,
             &mut solid,

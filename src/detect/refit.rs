@@ -9,7 +9,7 @@
 //! visited by tiles: a tile is scanned only when its cone of rays meets the row's band.
 
 use super::hough::fast_atan2;
-use super::sections::{NearField, Sections};
+use super::sections::{NearField, Sections, SECTION_BINS, SECTION_HUBER, SECTION_POWER};
 use super::types::{DetectError, Detection, Row};
 use crate::camera::OcamModel;
 use crate::memory::prefetch;
@@ -61,14 +61,6 @@ pub const MARGIN_PX: f64 = 1.5;
 /// noise there (e.g. salt and pepper) no longer moves the centroid, while the anti-aliased
 /// edges, which carry the sub-pixel position, keep their graded values.
 pub const PLATEAU_CAP: f64 = 0.6;
-/// Cross-sections around the whole great circle ([`Sections`]).
-const SECTION_BINS: usize = 256;
-/// Cross-sections farther than this many of their σ from the line lose weight (Huber).
-const SECTION_HUBER: f64 = 1.5;
-/// The plant-structure term of a cross-section's variance grows as its width to this power
-/// (2: the centre wanders by a share of the width; higher: also the correlation of
-/// neighbouring sections within one wide plant).
-const SECTION_POWER: f64 = 4.0;
 /// A row's curvature near the robot counts when it is at least this many of its standard
 /// deviations ([`Sections::near_foot`]).
 pub const NEAR_MIN_SIGMA: f64 = 4.0;
@@ -410,7 +402,7 @@ fn refit_row(
     // the great circle) lies inside the valid mask: where a mask edge (the annulus of a
     // catadioptric lens, the sky line) crosses a wide row obliquely, the part of the row it
     // cuts off on one side would otherwise pull the fitted centre line towards the other.
-    keep_full_sections(img, start, foot_band, margin, vp, cands);
+    keep_full_sections(cands, img, start, foot_band, margin, vp);
     let candidates = &*cands;
     let (s_band, s_foot, s_margin) = band_sines(foot_band, margin);
     let band = Band {
@@ -686,12 +678,12 @@ fn angle_along(f1: &[f32; 3], f2: &[f32; 3], p: [f32; 3]) -> f32 {
 /// same for a pixel and its mirror image across the circle, so a stretch is kept or dropped
 /// whole.
 fn keep_full_sections(
+    cands: &mut Candidates,
     img: &RefitImage,
     n: &Vector3<f64>,
     foot_band: f64,
     margin: f64,
     vp: Option<&Vector3<f64>>,
-    cands: &mut Candidates,
 ) {
     let f1 = any_perpendicular(n);
     let f2 = n.cross(&f1);
@@ -917,7 +909,6 @@ mod tests {
             &cal,
             &MaskOptions::default(),
             15.0,
-            None,
             &mut mask,
             &mut rays,
             &mut solid,

@@ -23,6 +23,15 @@ use nalgebra::{Matrix2, Matrix3, Vector3};
 /// The largest number of bins (the bins live on the stack).
 pub const MAX_SECTIONS: usize = 1024;
 
+/// The refit's cross-sections around the whole great circle.
+pub const SECTION_BINS: usize = 256;
+/// Cross-sections farther than this many of their σ from the line lose weight (Huber).
+pub const SECTION_HUBER: f64 = 1.5;
+/// The plant-structure term of a cross-section's variance grows as its width to this power
+/// (2: the centre wanders by a share of the width; higher: also the correlation of
+/// neighbouring sections within one wide plant).
+pub const SECTION_POWER: f64 = 4.0;
+
 /// Reweighting rounds (fit, residuals, variance model).
 const ROUNDS: usize = 4;
 

@@ -1,7 +1,7 @@
 //! The detector's shared vocabulary: what every stage and method reads and writes.
 //!
-//! Owns the result types ([`Row`], [`VanishingPoint`], [`Detection`]), the image buffer the
-//! stages share ([`GreyImage`]), the list of methods ([`Method`]) and the detector's error
+//! Owns the result types ([`Row`], [`VanishingPoint`], [`Detection`]), what the stages share
+//! ([`GreyImage`], the kept [`Points`]), the list of methods ([`Method`]) and the detector's error
 //! ([`DetectError`]). It depends on nothing else in the detector, so that every stage and
 //! method can depend on it.
 
@@ -86,6 +86,34 @@ impl Method {
             Method::Strips => "strips",
             Method::Auto => "auto",
         }
+    }
+}
+
+/// The kept points of an image, what the methods read: unit rays (camera frame) and
+/// their weights (smoothed vegetation value times the pixel's solid angle, so that fits are
+/// integrals over the sphere, free of the lens's varying pixel density).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Points {
+    pub rays: Vec<[f32; 3]>,
+    pub weights: Vec<f32>,
+    /// The angular size (radians) of each point's pixel: the calibration's resolution where
+    /// the point is, from which the stages' pixel scales become angles.
+    pub pixel_rad: Vec<f32>,
+}
+
+impl Points {
+    /// Checks that every point has its weight and pixel size (`what` names the reader in
+    /// the error).
+    pub fn check(&self, what: &str) -> Result<(), DetectError> {
+        let n = self.rays.len();
+        if self.weights.len() == n && self.pixel_rad.len() == n {
+            return Ok(());
+        }
+        Err(DetectError::Buffer(format!(
+            "{what}: {n} rays, {} weights, {} pixel sizes",
+            self.weights.len(),
+            self.pixel_rad.len()
+        )))
     }
 }
 

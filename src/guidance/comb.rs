@@ -229,9 +229,8 @@ fn initial_comb(ys: &[f64], opts: &CombOptions) -> Option<(f64, f64)> {
     let mut best: Option<(f64, f64, f64)> = None; // score, s, anchor
     each(&mut |s| {
         if let Some((sc, a)) = best_anchor(s) {
-            let better = best.is_none_or(|(bsc, bs, _)| {
-                sc > bsc + 1e-9 || (sc > bsc - 1e-9 && s > bs)
-            });
+            let better =
+                best.is_none_or(|(bsc, bs, _)| sc > bsc + 1e-9 || (sc > bsc - 1e-9 && s > bs));
             if better {
                 best = Some((sc, s, a));
             }

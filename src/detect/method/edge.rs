@@ -10,7 +10,7 @@
 use super::{Frame, RowMethod};
 use crate::detect::boundaries::Boundaries;
 use crate::detect::centre::CentreLines;
-use crate::detect::chords::{Bend, ChordBend};
+use crate::detect::chords::ChordBend;
 use crate::detect::combine::{PrecisionRefit, REFERENCE_PAIR_MAX_DEG};
 use crate::detect::edge::EdgeOptions;
 use crate::detect::refit::{turn_to_feet, NEAR_MIN_SIGMA};
@@ -29,7 +29,6 @@ pub struct EdgeMethod {
     /// > 0).
     bend_rows: bool,
     bend: ChordBend,
-    last_bend: Option<Bend>,
     /// The rows before the bend, and a detection to vote on them.
     chord_rows: Vec<Row>,
     probe: Detection,
@@ -55,7 +54,6 @@ impl EdgeMethod {
             boundaries: Boundaries::new(opts, angle_factor)?,
             bend_rows,
             bend: ChordBend::default(),
-            last_bend: None,
             chord_rows: Vec::with_capacity(64),
             probe: Detection::default(),
             refit: PrecisionRefit::default(),
@@ -66,18 +64,12 @@ impl EdgeMethod {
         })
     }
 
-    /// The bend the method found in its rows in the last frame, when it turned them.
-    pub fn last_bend(&self) -> Option<Bend> {
-        self.last_bend
-    }
-
     /// The rows, chords on one side of the robot on a curved field, turned to their
     /// tangents beside it before the vote ([`ChordBend::turn`]). Kept only when the turned
     /// rows agree on their vanishing point better than the chords did: a tilted robot on a
     /// straight field also makes the chords' headings, projected on the nominal ground,
     /// change with the distance ahead, but their great circles still meet.
     fn bend(&mut self, frame: &mut Frame<'_>) -> Result<(), DetectError> {
-        self.last_bend = None;
         if !self.bend_rows {
             return Ok(());
         }
@@ -87,21 +79,20 @@ impl EdgeMethod {
         };
         self.chord_rows.clear();
         self.chord_rows.extend_from_slice(rows);
-        let Some(bend) = self.bend.turn(
+        let bent = self.bend.turn(
             rows,
             edge.sections(),
             edge.assignment(),
             &edge.chains().rays,
             &robot_from_camera,
             NEAR_MIN_SIGMA,
-        ) else {
+        );
+        if bent.is_none() {
             return Ok(());
-        };
+        }
         let chords = self.agreement(frame, true)?;
         let turned = self.agreement(frame, false)?;
-        if turned > BEND_GAIN * chords {
-            self.last_bend = Some(bend);
-        } else {
+        if turned <= BEND_GAIN * chords {
             self.boundaries.rows.clear();
             self.boundaries.rows.extend_from_slice(&self.chord_rows);
         }

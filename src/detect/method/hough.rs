@@ -7,7 +7,7 @@
 //! curved rows turned to where they pass the robot.
 
 use super::{hough_rows, Frame, RowMethod};
-use crate::detect::hough::{HoughOptions, HoughParams, HoughResult, HoughRows};
+use crate::detect::hough::{HoughOptions, HoughParams, HoughRows};
 use crate::detect::refit::turn_to_feet;
 use crate::detect::types::DetectError;
 use crate::detect::vanishing::support_weights;
@@ -16,7 +16,6 @@ use crate::detect::vanishing::support_weights;
 #[derive(Debug, Clone)]
 pub struct HoughMethod {
     transform: HoughRows,
-    last: HoughResult,
 }
 
 impl HoughMethod {
@@ -25,19 +24,13 @@ impl HoughMethod {
     pub fn new(opts: &HoughOptions, angle_factor: f64) -> Result<Self, DetectError> {
         Ok(HoughMethod {
             transform: HoughRows::new(HoughParams::new(opts, angle_factor))?,
-            last: HoughResult::default(),
         })
-    }
-
-    /// What the transform did in the last image.
-    pub fn last(&self) -> HoughResult {
-        self.last
     }
 }
 
 impl RowMethod for HoughMethod {
     fn rows(&mut self, frame: &mut Frame<'_>) -> Result<(), DetectError> {
-        self.last = hough_rows(&mut self.transform, frame)?;
+        hough_rows(&mut self.transform, frame)?;
         support_weights(&frame.out.rows, frame.weights);
         Ok(())
     }

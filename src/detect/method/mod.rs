@@ -21,8 +21,8 @@ pub mod pencil;
 pub mod strips;
 
 use super::hough::{HoughResult, HoughRows};
-use super::prepare::{Points, PrepareResult, Preparer};
-use super::types::{DetectError, Detection, Method};
+use super::prepare::{PrepareResult, Preparer};
+use super::types::{DetectError, Detection, Method, Points};
 use super::vanishing::VanishingStage;
 use crate::camera::Mounting;
 use nalgebra::Vector3;

@@ -10,7 +10,7 @@
 
 use super::{Frame, RowMethod};
 use crate::camera::Mounting;
-use crate::detect::pencil::{PencilOptions, PencilResult, PencilRows};
+use crate::detect::pencil::{PencilOptions, PencilRows};
 use crate::detect::types::DetectError;
 use crate::detect::vanishing::support_weights;
 
@@ -18,7 +18,6 @@ use crate::detect::vanishing::support_weights;
 #[derive(Debug, Clone)]
 pub struct PencilMethod {
     pencil: PencilRows,
-    last: PencilResult,
 }
 
 impl PencilMethod {
@@ -31,13 +30,7 @@ impl PencilMethod {
     ) -> Result<Self, DetectError> {
         Ok(PencilMethod {
             pencil: PencilRows::new(opts, max_tilt_deg, mounting)?,
-            last: PencilResult::default(),
         })
-    }
-
-    /// What the search found in the last frame.
-    pub fn last(&self) -> PencilResult {
-        self.last
     }
 }
 
@@ -47,10 +40,7 @@ impl RowMethod for PencilMethod {
     }
 
     fn rows(&mut self, frame: &mut Frame<'_>) -> Result<(), DetectError> {
-        let p = frame.points;
-        self.last = self
-            .pencil
-            .find(&p.rays, &p.weights, &p.pixel_rad, &mut frame.out.rows)?;
+        self.pencil.find(frame.points, &mut frame.out.rows)?;
         support_weights(&frame.out.rows, frame.weights);
         Ok(())
     }

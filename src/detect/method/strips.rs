@@ -61,10 +61,7 @@ impl RowMethod for StripsMethod {
     fn rows(&mut self, frame: &mut Frame<'_>) -> Result<(), DetectError> {
         self.strips
             .set_window(frame.window.as_ref().map(|(v, w)| (v, *w)));
-        let p = frame.points;
-        self.found = self
-            .strips
-            .find(&p.rays, &p.weights, &p.pixel_rad, &mut frame.out.rows)?;
+        self.found = self.strips.find(frame.points, &mut frame.out.rows)?;
         support_weights(&frame.out.rows, frame.weights);
         Ok(())
     }

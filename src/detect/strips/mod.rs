@@ -40,7 +40,7 @@ mod testing;
 mod virtual_image;
 
 use super::pose::RobotAxes;
-use super::types::{DetectError, Row};
+use super::types::{DetectError, Points, Row};
 use crate::camera::Mounting;
 use agreement::SeenColumns;
 use nalgebra::Vector3;
@@ -243,19 +243,11 @@ impl StripsRows {
     /// the points hold no rows.
     pub fn find(
         &mut self,
-        rays: &[[f32; 3]],
-        weights: &[f32],
-        pixel_rad: &[f32],
+        points: &Points,
         rows: &mut Vec<Row>,
     ) -> Result<Option<Vector3<f64>>, DetectError> {
-        if rays.len() != weights.len() || rays.len() != pixel_rad.len() {
-            return Err(DetectError::Buffer(format!(
-                "strips: {} rays, {} weights, {} pixel sizes",
-                rays.len(),
-                weights.len(),
-                pixel_rad.len()
-            )));
-        }
+        points.check("strips")?;
+        let (rays, weights, pixel_rad) = (&points.rays, &points.weights, &points.pixel_rad);
         rows.clear();
         self.last = StripsResult::default();
         if !self.set_scale(rays, pixel_rad) {
@@ -328,12 +320,12 @@ mod tests {
         let opts = StripsOptions::default();
         let va = StripsRows::new(opts, 15.0, &m)
             .unwrap()
-            .find(&narrow.rays, &narrow.weights, &narrow.pixel_rad, &mut a)
+            .find(&narrow.points(), &mut a)
             .unwrap()
             .unwrap();
         let vb = StripsRows::new(opts, 15.0, &m)
             .unwrap()
-            .find(&wide.rays, &wide.weights, &wide.pixel_rad, &mut b)
+            .find(&wide.points(), &mut b)
             .unwrap()
             .unwrap();
         let d = va.dot(&vb).abs().min(1.0).acos();
@@ -438,8 +430,12 @@ mod tests {
         let m = forward_camera();
         let mut s = StripsRows::new(StripsOptions::default(), 15.0, &m).unwrap();
         let mut rows = vec![];
-        assert_eq!(s.find(&[], &[], &[], &mut rows).unwrap(), None);
+        assert_eq!(s.find(&Points::default(), &mut rows).unwrap(), None);
         assert!(rows.is_empty());
-        assert!(s.find(&[[0.0, 0.0, -1.0]], &[], &[], &mut rows).is_err());
+        let mismatched = Points {
+            rays: vec![[0.0, 0.0, -1.0]],
+            ..Points::default()
+        };
+        assert!(s.find(&mismatched, &mut rows).is_err());
     }
 }

@@ -23,11 +23,6 @@ const PROMINENCE_PX: usize = 15;
 /// most prominent one.
 const PEAK_FRACTION: f64 = 0.15;
 
-/// The most strips and profile bins an image may have (a hostile calibration or image
-/// cannot make the buffers grow without bound).
-const MAX_STRIPS: usize = 4096;
-const MAX_BINS: usize = 16384;
-
 /// A peak of a strip: along the horizon, below it (pixels), its height, its strip.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(super) struct Peak {
@@ -73,8 +68,10 @@ impl StripsRows {
         if self.pts.len() < 2 || a1 <= a0 || p1 <= p0 {
             return;
         }
-        let strips = (((p1 - p0) / STRIP_PX).floor() as usize + 1).min(MAX_STRIPS);
-        let bins = ((a1 - a0).floor() as usize + 1).min(MAX_BINS);
+        // at most 4096 strips and 16384 bins: a hostile calibration or image cannot make
+        // the buffers grow without bound
+        let strips = (((p1 - p0) / STRIP_PX).floor() as usize + 1).min(4096);
+        let bins = ((a1 - a0).floor() as usize + 1).min(16384);
         self.hist.clear();
         self.hist.resize(strips * bins, 0.0);
         for &[a, p, w] in &self.pts {

@@ -358,7 +358,7 @@ mod tests {
         assert_eq!(s.agreement_near(&ray), None, "no image yet");
         let mut rows = Vec::new();
         let vp = s
-            .find(&fld.rays, &fld.weights, &fld.pixel_rad, &mut rows)
+            .find(&fld.points(), &mut rows)
             .unwrap()
             .expect("a vanishing point");
         let found = s.last();
@@ -377,8 +377,7 @@ mod tests {
         assert!(e < 0.5 * found.agreement, "{e} {found:?}");
         assert!(away > 50.0, "{away}");
         // the next image starts from its own peaks: the same answer again
-        s.find(&fld.rays, &fld.weights, &fld.pixel_rad, &mut rows)
-            .unwrap();
+        s.find(&fld.points(), &mut rows).unwrap();
         assert_eq!(s.last(), found);
     }
 
@@ -438,7 +437,7 @@ mod tests {
             s.set_window(window);
             let mut rows = Vec::new();
             let vp = s
-                .find(&weedy.rays, &weedy.weights, &weedy.pixel_rad, &mut rows)
+                .find(&weedy.points(), &mut rows)
                 .unwrap()
                 .expect("a vanishing point");
             (vp, s.last().evaluated)
@@ -456,9 +455,7 @@ mod tests {
         let mut s = StripsRows::new(StripsOptions::default(), 15.0, &m).unwrap();
         s.set_window(Some((&side, w)));
         let mut rows = Vec::new();
-        let got = s
-            .find(&fld.rays, &fld.weights, &fld.pixel_rad, &mut rows)
-            .unwrap();
+        let got = s.find(&fld.points(), &mut rows).unwrap();
         assert!(
             got.is_none() && rows.is_empty(),
             "{got:?}, {} rows",
@@ -466,12 +463,10 @@ mod tests {
         );
         // widened again: the full search's answer on the same points
         s.set_window(None);
-        let again = s
-            .find(&fld.rays, &fld.weights, &fld.pixel_rad, &mut rows)
-            .unwrap();
+        let again = s.find(&fld.points(), &mut rows).unwrap();
         let full = StripsRows::new(StripsOptions::default(), 15.0, &m)
             .unwrap()
-            .find(&fld.rays, &fld.weights, &fld.pixel_rad, &mut rows)
+            .find(&fld.points(), &mut rows)
             .unwrap()
             .expect("a vanishing point");
         assert!(again.is_some_and(|v| v.dot(&full).abs() > 1.0 - 1e-9));

@@ -3,7 +3,7 @@
 
 use super::{StripsOptions, StripsRows};
 use crate::camera::Mounting;
-use crate::detect::types::Row;
+use crate::detect::types::{Points, Row};
 use nalgebra::{Rotation3, Vector3};
 
 /// The strips method with its defaults (tilt within 15°) on `fld` seen from `m`: the method
@@ -11,9 +11,7 @@ use nalgebra::{Rotation3, Vector3};
 pub fn detect(fld: &Field, m: &Mounting) -> (StripsRows, Option<Vector3<f64>>, Vec<Row>) {
     let mut s = StripsRows::new(StripsOptions::default(), 15.0, m).unwrap();
     let mut rows = Vec::new();
-    let vp = s
-        .find(&fld.rays, &fld.weights, &fld.pixel_rad, &mut rows)
-        .unwrap();
+    let vp = s.find(&fld.points(), &mut rows).unwrap();
     (s, vp, rows)
 }
 
@@ -26,6 +24,17 @@ pub struct Field {
     pub weights: Vec<f32>,
     pub pixel_rad: Vec<f32>,
     pub normals: Vec<Vector3<f64>>,
+}
+
+impl Field {
+    /// The field's points as the detector hands them to a method.
+    pub fn points(&self) -> Points {
+        Points {
+            rays: self.rays.clone(),
+            weights: self.weights.clone(),
+            pixel_rad: self.pixel_rad.clone(),
+        }
+    }
 }
 
 pub fn field(f: f64, size: f64, m: &Mounting, spacing: f64, offset: f64, heading: f64) -> Field {
