@@ -151,7 +151,17 @@ pub struct Estimate {
     /// their way to row guidance, which measures on them beside the rows; not published.
     #[serde(skip)]
     pub boundary_normals: Vec<[f64; 3]>,
+    /// Where the frame's time went, milliseconds, stage by stage ([`STAGES`]); not
+    /// published: the node's metrics summarise it.
+    #[serde(skip)]
+    pub stage_ms: [f64; 4],
 }
+
+/// The stages of a frame's time in [`Estimate::stage_ms`]: the detector's preparation
+/// (vegetation, smoothing, threshold), its method's rows (and their refit), the vote for the
+/// vanishing point with the method's finishing steps, and the rows' fit on the ground for
+/// guidance.
+pub const STAGES: [&str; 4] = ["prepare", "rows", "vanishing", "row_fit"];
 
 impl Estimate {
     /// Builds the estimate of `frame` from the detector's answer. `publish_ns` is filled in
@@ -219,6 +229,7 @@ impl Estimate {
             guidance: None,
             row_fit: None,
             boundary_normals: Vec::new(),
+            stage_ms: [0.0; 4],
         }
     }
 
@@ -243,6 +254,7 @@ impl Estimate {
             guidance: None,
             row_fit: None,
             boundary_normals: Vec::new(),
+            stage_ms: [0.0; 4],
         }
     }
 

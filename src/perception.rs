@@ -77,6 +77,8 @@ pub struct Measurement {
     detector: Detector,
     row_fit: Option<RowFit>,
     min_quality: f64,
+    /// The last rows' fit's time, milliseconds.
+    row_fit_ms: f64,
 }
 
 impl Measurement {
@@ -92,6 +94,7 @@ impl Measurement {
             detector: Detector::new(cal, detector)?,
             row_fit: row_fit.then(|| RowFit::new(cal.mounting, RowFitOptions::default())),
             min_quality,
+            row_fit_ms: 0.0,
         })
     }
 
@@ -112,6 +115,7 @@ impl Measurement {
         let ms = t.elapsed().as_secs_f64() * 1e3;
         let mut est = Estimate::from_detection(frame, det, ms, self.min_quality);
         est.row_fit = self.row_fit(det);
+        est.stage_ms = self.stage_ms();
         Ok(est)
     }
 
@@ -128,9 +132,20 @@ impl Measurement {
     /// The rows' fit on the ground from the points of the image just detected into `det`,
     /// when the rows are fitted.
     pub fn row_fit(&mut self, det: &Detection) -> Option<crate::guidance::RowFitMeasurement> {
-        self.row_fit
+        let t = Instant::now();
+        let fit = self
+            .row_fit
             .as_mut()?
-            .measure_detection(det, self.detector.points())
+            .measure_detection(det, self.detector.points());
+        self.row_fit_ms = t.elapsed().as_secs_f64() * 1e3;
+        fit
+    }
+
+    /// Where the last frame's time went, milliseconds ([`crate::estimate::STAGES`]).
+    pub fn stage_ms(&self) -> [f64; 4] {
+        let t = self.detector.last_times();
+        let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
+        [ms(t.prepare), ms(t.rows), ms(t.vanishing), self.row_fit_ms]
     }
 }
 
@@ -293,6 +308,12 @@ mod tests {
             let g = est.guidance.expect("guidance on every frame");
             assert!(g.lateral_offset_m.is_some(), "frame {seq}");
             assert!(est.row_fit.is_some(), "frame {seq}");
+            // every stage's time is measured
+            assert!(
+                est.stage_ms.iter().all(|&ms| ms > 0.0),
+                "{:?}",
+                est.stage_ms
+            );
         }
         // once the tracker has an estimate, the detector searches in its window
         assert_eq!(p.detector().last_prior(), PriorOutcome::Accepted);

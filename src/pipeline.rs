@@ -65,6 +65,12 @@ pub trait Processor: Send {
     fn row_fit(&mut self, _det: &Detection) -> Option<crate::guidance::RowFitMeasurement> {
         None
     }
+
+    /// Where the last frame's time went, milliseconds ([`crate::estimate::STAGES`]); zeros
+    /// by default.
+    fn stage_ms(&self) -> [f64; 4] {
+        [0.0; 4]
+    }
 }
 
 impl Processor for Measurement {
@@ -87,6 +93,10 @@ impl Processor for Measurement {
 
     fn row_fit(&mut self, det: &Detection) -> Option<crate::guidance::RowFitMeasurement> {
         Measurement::row_fit(self, det)
+    }
+
+    fn stage_ms(&self) -> [f64; 4] {
+        Measurement::stage_ms(self)
     }
 }
 
@@ -704,6 +714,7 @@ fn detect(
         Ok(()) => {
             let mut est = Estimate::from_detection(frame, det, ms, min_quality);
             est.row_fit = proc.row_fit(det);
+            est.stage_ms = proc.stage_ms();
             est
         }
         Err(e) => {

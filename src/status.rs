@@ -35,6 +35,10 @@ pub struct StatusSummary {
     /// End-to-end latency (receive → publish) over the last 1024 frames, milliseconds.
     pub latency_p50_ms: f64,
     pub latency_p99_ms: f64,
+    /// Each stage's time per frame ([`crate::estimate::STAGES`]) over the last 1024 frames,
+    /// milliseconds.
+    pub stage_p50_ms: [f64; 4],
+    pub stage_p99_ms: [f64; 4],
     pub source_state: SourceState,
     pub recording: String,
     pub recorded_frames: u64,
@@ -74,6 +78,7 @@ pub struct Shared {
 struct Samples {
     detector_ms: VecDeque<f64>,
     latency_ms: VecDeque<f64>,
+    stage_ms: [VecDeque<f64>; 4],
     status_counts: BTreeMap<String, u64>,
 }
 
@@ -240,15 +245,19 @@ impl Shared {
         // Copy the samples out and sort them after the lock is released: the readers are the
         // HTTP service's low-priority threads, and a reader preempted while it sorted under
         // the lock would hold up the publisher, which samples every frame.
-        let (detector_ms, latency_ms, status_counts) = {
+        let (detector_ms, latency_ms, stage_ms, status_counts) = {
             let s = lock(&self.samples);
             (
                 s.detector_ms.iter().copied().collect::<Vec<f64>>(),
                 s.latency_ms.iter().copied().collect::<Vec<f64>>(),
+                s.stage_ms
+                    .clone()
+                    .map(|v| v.into_iter().collect::<Vec<f64>>()),
                 s.status_counts.clone(),
             )
         };
         let (detector_ms, latency_ms) = (sorted(detector_ms), sorted(latency_ms));
+        let stage_ms = stage_ms.map(sorted);
         StatusSummary {
             uptime_s: self.started.elapsed().as_secs_f64(),
             frames_in: self.frames_in.load(Ordering::Relaxed),
@@ -262,6 +271,8 @@ impl Shared {
             detector_p99_ms: percentile(&detector_ms, 0.99),
             latency_p50_ms: percentile(&latency_ms, 0.5),
             latency_p99_ms: percentile(&latency_ms, 0.99),
+            stage_p50_ms: std::array::from_fn(|i| percentile(&stage_ms[i], 0.5)),
+            stage_p99_ms: std::array::from_fn(|i| percentile(&stage_ms[i], 0.99)),
             source_state: self.source_state(),
             recording: lock(&self.recording).clone(),
             recorded_frames: self.recorded_frames.load(Ordering::Relaxed),
@@ -326,9 +337,15 @@ impl Shared {
         if s.detector_ms.len() == SAMPLE_WINDOW {
             s.detector_ms.pop_front();
             s.latency_ms.pop_front();
+            for v in s.stage_ms.iter_mut() {
+                v.pop_front();
+            }
         }
         s.detector_ms.push_back(e.detector_ms);
         s.latency_ms.push_back(e.latency_ms);
+        for (v, &ms) in s.stage_ms.iter_mut().zip(&e.stage_ms) {
+            v.push_back(ms);
+        }
         *s.status_counts
             .entry(e.status.name().to_string())
             .or_default() += 1;

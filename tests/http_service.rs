@@ -64,6 +64,9 @@ fn endpoints_serve_health_status_history_metrics_and_overlay() {
         "omnirow_frames_dropped_total ",
         "omnirow_detector_ms{quantile=\"0.99\"} ",
         "omnirow_latency_ms{quantile=\"0.5\"} ",
+        "# TYPE omnirow_stage_ms summary",
+        "omnirow_stage_ms{stage=\"prepare\",quantile=\"0.5\"} ",
+        "omnirow_stage_ms{stage=\"row_fit\",quantile=\"0.99\"} ",
         "omnirow_source_state{state=\"streaming\"} 1",
         "omnirow_pipeline_alive 1",
         "# TYPE omnirow_guidance_tracking gauge",
@@ -76,6 +79,13 @@ fn endpoints_serve_health_status_history_metrics_and_overlay() {
     ] {
         assert!(text.contains(m), "missing `{m}` in\n{text}");
     }
+    // The stages' times come from the detector's own timer: the preparation takes time.
+    let prepare: f64 = text
+        .lines()
+        .find_map(|l| l.strip_prefix("omnirow_stage_ms{stage=\"prepare\",quantile=\"0.5\"} "))
+        .and_then(|v| v.trim().parse().ok())
+        .unwrap();
+    assert!(prepare > 0.0, "{text}");
     // One tracking state is the current one.
     let current: Vec<&str> = text
         .lines()

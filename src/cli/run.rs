@@ -183,6 +183,16 @@ fn camera_source(_: &crate::gige::GigeConfig) -> anyhow::Result<Box<dyn Source>>
     )
 }
 
+/// Each stage's time ([`crate::estimate::STAGES`]) as one line: `prepare 3.10, rows ...`.
+fn stage_line(ms: &[f64; 4]) -> String {
+    let parts: Vec<String> = crate::estimate::STAGES
+        .iter()
+        .zip(ms)
+        .map(|(name, v)| format!("{name} {v:.2}"))
+        .collect();
+    parts.join(", ")
+}
+
 /// `omnirow run` and `omnirow record --out DIR`.
 pub fn run(args: RunArgs, record_to: Option<PathBuf>) -> anyhow::Result<ExitCode> {
     let mut cfg = configure(&args)?;
@@ -425,6 +435,8 @@ pub fn run(args: RunArgs, record_to: Option<PathBuf>) -> anyhow::Result<ExitCode
         detector_p99_ms = format_args!("{:.2}", st.detector_p99_ms),
         latency_p50_ms = format_args!("{:.2}", st.latency_p50_ms),
         latency_p99_ms = format_args!("{:.2}", st.latency_p99_ms),
+        stage_p50_ms = %stage_line(&st.stage_p50_ms),
+        stage_p99_ms = %stage_line(&st.stage_p99_ms),
         "finished"
     );
     if let Some(e) = shared.source_error() {

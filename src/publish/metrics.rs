@@ -166,6 +166,28 @@ pub fn metrics(shared: &Shared, changes: &TrackingCounts) -> String {
             ("{quantile=\"0.99\"}".into(), s.latency_p99_ms),
         ],
     );
+    let stages: Vec<(String, f64)> = crate::estimate::STAGES
+        .iter()
+        .enumerate()
+        .flat_map(|(i, name)| {
+            [
+                (
+                    format!("{{stage=\"{name}\",quantile=\"0.5\"}}"),
+                    s.stage_p50_ms[i],
+                ),
+                (
+                    format!("{{stage=\"{name}\",quantile=\"0.99\"}}"),
+                    s.stage_p99_ms[i],
+                ),
+            ]
+        })
+        .collect();
+    metric(
+        "omnirow_stage_ms",
+        "summary",
+        "Each stage's time per frame over the last 1024 frames, milliseconds: the detector's preparation, its method's rows, the vote for the vanishing point with the method's finish, and the rows' fit on the ground.",
+        &stages,
+    );
     let states = [
         SourceState::Starting,
         SourceState::Streaming,

@@ -336,6 +336,8 @@ mod tests {
             detector_p99_ms: 9.0,
             latency_p50_ms: 11.0,
             latency_p99_ms: 21.0,
+            stage_p50_ms: [1.0; 4],
+            stage_p99_ms: [2.0; 4],
             source_state: SourceState::Lost,
             recording: String::new(),
             recorded_frames: 0,
