@@ -1,7 +1,7 @@
 //! The whole per-frame step of the node (src/perception.rs): the detector, the rows' fit on
 //! the ground and row guidance with its tracker, on full-resolution 2448×2050 Bayer RGGB
 //! frames of the default synthetic drive (the GC2450C's frames through the ideal 185°
-//! fisheye; `auto` runs the combined method), one thread. The detector's own benches
+//! fisheye; `auto` runs the combined method), on one thread and on two. The detector's own benches
 //! (`detector`, `edge`) time it alone; this one shows what a frame costs the node.
 //!
 //! `cargo bench --bench step`
@@ -31,9 +31,15 @@ fn bench(c: &mut Criterion) {
     let cal = drive.calibration().clone();
     let mut g = c.benchmark_group("step_bayer_2448x2050");
     g.sample_size(20).measurement_time(Duration::from_secs(6));
-    for (name, narrow) in [("full_search", false), ("narrowed", true)] {
+    for (name, narrow, threads) in [
+        ("full_search", false, 1),
+        ("narrowed", true, 1),
+        ("full_search_2_threads", false, 2),
+        ("narrowed_2_threads", true, 2),
+    ] {
         let opts = PerceptionOptions {
             narrow_search: narrow,
+            threads,
             ..PerceptionOptions::default()
         };
         let mut step = Perception::new(&cal, &opts).unwrap();

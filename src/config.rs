@@ -79,6 +79,8 @@ pub struct Config {
     pub frame_id: String,
     pub pipeline: PipelineOptions,
     pub workers: usize,
+    /// Threads of each detector worker (`[pipeline] threads`).
+    pub threads: usize,
     pub udp: Vec<SocketAddr>,
     pub multicast_ttl: u32,
     pub multicast_loop: bool,
@@ -208,7 +210,7 @@ fn compose(raw: RawConfig, tables: Option<&Table>, c: &mut Check) -> Config {
             None
         });
     let (calibration, frame_id) = raw.camera.unwrap_or_default().validate(c);
-    let (mut pipeline, workers) = raw
+    let (mut pipeline, workers, threads) = raw
         .pipeline
         .unwrap_or_default()
         .validate(&publish.status_interval_s, c);
@@ -233,6 +235,7 @@ fn compose(raw: RawConfig, tables: Option<&Table>, c: &mut Check) -> Config {
         frame_id,
         pipeline,
         workers,
+        threads,
         udp: udp.destinations,
         multicast_ttl: udp.multicast_ttl,
         multicast_loop: udp.multicast_loop,
@@ -457,7 +460,7 @@ mod tests {
 
     #[test]
     fn impossible_values_all_reported() {
-        let e = err("[pipeline]\nframe_queue = 0\nworkers = 99\n[publish]\nudp = [\"127.0.0.1:7447\", \"nowhere\"]\n[source.synthetic]\nwidth = 33\n");
+        let e = err("[pipeline]\nframe_queue = 0\nworkers = 99\nthreads = 0\n[publish]\nudp = [\"127.0.0.1:7447\", \"nowhere\"]\n[source.synthetic]\nwidth = 33\n");
         let keys: Vec<(usize, &str)> = e
             .problems
             .iter()
@@ -466,10 +469,11 @@ mod tests {
         assert_eq!(
             keys,
             vec![
-                (7, "source.synthetic.width"),
+                (8, "source.synthetic.width"),
                 (2, "pipeline.frame_queue"),
                 (3, "pipeline.workers"),
-                (5, "publish.udp"),
+                (4, "pipeline.threads"),
+                (6, "publish.udp"),
             ]
         );
         let e = err("[source]\nkind = \"replay\"\n");

@@ -82,16 +82,20 @@ pub struct Measurement {
 }
 
 impl Measurement {
-    /// The detector for `cal` with `detector` options; `row_fit`: also fit the rows on the
-    /// ground (for row guidance); estimates below `min_quality` are `degraded`.
+    /// The detector for `cal` with `detector` options, each frame's independent parts on
+    /// `threads` threads; `row_fit`: also fit the rows on the ground (for row guidance);
+    /// estimates below `min_quality` are `degraded`.
     pub fn new(
         cal: &Calibration,
         detector: DetectorOptions,
+        threads: usize,
         row_fit: bool,
         min_quality: f64,
     ) -> Result<Self, DetectError> {
+        let mut d = Detector::new(cal, detector)?;
+        d.set_threads(threads)?;
         Ok(Measurement {
-            detector: Detector::new(cal, detector)?,
+            detector: d,
             row_fit: row_fit.then(|| RowFit::new(cal.mounting, RowFitOptions::default())),
             min_quality,
             row_fit_ms: 0.0,
@@ -139,6 +143,10 @@ impl Measurement {
             .measure_detection(det, self.detector.points());
         self.row_fit_ms = t.elapsed().as_secs_f64() * 1e3;
         fit
+    }
+
+    pub fn detector(&self) -> &Detector {
+        &self.detector
     }
 
     /// Where the last frame's time went, milliseconds ([`crate::estimate::STAGES`]).
@@ -190,6 +198,8 @@ pub struct PerceptionOptions {
     /// With guidance, narrow each frame's search by the tracker's prediction.
     pub narrow_search: bool,
     pub min_quality: f64,
+    /// Threads each frame's independent parts run on ([`Detector::set_threads`]).
+    pub threads: usize,
 }
 
 impl Default for PerceptionOptions {
@@ -199,6 +209,7 @@ impl Default for PerceptionOptions {
             guidance: Some(GuidanceOptions::default()),
             narrow_search: false,
             min_quality: DEFAULT_MIN_QUALITY,
+            threads: 1,
         }
     }
 }
@@ -220,6 +231,7 @@ impl Perception {
             measurement: Measurement::new(
                 cal,
                 opts.detector.clone(),
+                opts.threads,
                 opts.guidance.is_some(),
                 opts.min_quality,
             )?,

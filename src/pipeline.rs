@@ -71,6 +71,12 @@ pub trait Processor: Send {
     fn stage_ms(&self) -> [f64; 4] {
         [0.0; 4]
     }
+
+    /// The threads the processor runs a frame's parts on, when it has any: its worker's
+    /// loop then runs on them, so that a frame starts there without being handed over.
+    fn pool(&self) -> Option<Arc<rayon::ThreadPool>> {
+        None
+    }
 }
 
 impl Processor for Measurement {
@@ -97,6 +103,10 @@ impl Processor for Measurement {
 
     fn stage_ms(&self) -> [f64; 4] {
         Measurement::stage_ms(self)
+    }
+
+    fn pool(&self) -> Option<Arc<rayon::ThreadPool>> {
+        self.detector().pool()
     }
 }
 
@@ -143,6 +153,14 @@ impl Default for PipelineOptions {
     }
 }
 
+/// Detector workers by default (`[pipeline] workers`): frames in parallel. One, so that both
+/// cores go to each frame in turn ([`DEFAULT_THREADS`]): the newest frame's answer comes
+/// sooner.
+pub const DEFAULT_WORKERS: i64 = 1;
+/// Threads per detector worker by default (`[pipeline] threads`): each frame's independent
+/// parts at once.
+pub const DEFAULT_THREADS: i64 = 2;
+
 /// `[pipeline]` of the node's configuration, as written.
 #[derive(Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -151,6 +169,7 @@ pub(crate) struct RawPipeline {
     estimate_queue: Raw<i64>,
     record_queue: Raw<i64>,
     workers: Raw<i64>,
+    threads: Raw<i64>,
     min_quality: Raw<f64>,
     narrow_search: Raw<bool>,
     narrow_min_window_deg: Raw<f64>,
@@ -159,16 +178,17 @@ pub(crate) struct RawPipeline {
 
 impl RawPipeline {
     /// Checks `[pipeline]`, and `[publish] status_interval_s`: the options (the run's limits
-    /// are `[source]`'s) and the number of detector workers.
+    /// are `[source]`'s), the number of detector workers and the threads each has.
     pub(crate) fn validate(
         self,
         status_interval_s: &Raw<f64>,
         c: &mut Check,
-    ) -> (PipelineOptions, usize) {
+    ) -> (PipelineOptions, usize, usize) {
         let frame_queue = c.range("pipeline.frame_queue", &self.frame_queue, 2, 1, 64);
         let estimate_queue = c.range("pipeline.estimate_queue", &self.estimate_queue, 8, 1, 1024);
         let record_queue = c.range("pipeline.record_queue", &self.record_queue, 4, 1, 256);
-        let workers = c.range("pipeline.workers", &self.workers, 2, 1, 8);
+        let workers = c.range("pipeline.workers", &self.workers, DEFAULT_WORKERS, 1, 8);
+        let threads = c.range("pipeline.threads", &self.threads, DEFAULT_THREADS, 1, 16);
         let status_interval_s = c.range(
             "publish.status_interval_s",
             status_interval_s,
@@ -212,7 +232,7 @@ impl RawPipeline {
             }),
             ..options
         };
-        (options, workers as usize)
+        (options, workers as usize, threads as usize)
     }
 }
 
@@ -657,6 +677,21 @@ impl Intake {
 /// A detector worker thread: runs `proc` on frame after frame and sends each estimate to the
 /// publisher, until the frame queue is closed (the source is done) and empty.
 fn run_worker(
+    hb: &Heartbeat,
+    proc: Box<dyn Processor>,
+    intake: &Mutex<Intake>,
+    done: Sender<Done>,
+    min_quality: f64,
+    prior: &PriorSlot,
+) {
+    match proc.pool() {
+        Some(pool) => pool.install(|| worker_loop(hb, proc, intake, done, min_quality, prior)),
+        None => worker_loop(hb, proc, intake, done, min_quality, prior),
+    }
+}
+
+/// [`run_worker`]'s loop, on the thread it is called on.
+fn worker_loop(
     hb: &Heartbeat,
     mut proc: Box<dyn Processor>,
     intake: &Mutex<Intake>,

@@ -272,6 +272,7 @@ pub fn run(args: RunArgs, record_to: Option<PathBuf>) -> anyhow::Result<ExitCode
             Measurement::new(
                 &cal,
                 opts.clone(),
+                cfg.threads,
                 cfg.guidance.is_some(),
                 cfg.pipeline.min_quality,
             )

@@ -6,7 +6,7 @@
 //! stage the edge and the combined methods share.
 
 use super::edge::{EdgeDetector, EdgeError, EdgeOptions, EdgeParams, REFERENCE_MAX_ANGLE_RAD};
-use super::prepare::Preparer;
+use super::prepare::PreparedImage;
 use super::types::{DetectError, Row};
 
 impl From<EdgeError> for DetectError {
@@ -43,15 +43,10 @@ impl Boundaries {
 
     /// Finds the boundary lines on the preparation's last image (`rebuilt`: its setup was
     /// rebuilt for it).
-    pub fn run(&mut self, prep: &Preparer, rebuilt: bool) -> Result<(), DetectError> {
+    pub fn run(&mut self, image: &PreparedImage, rebuilt: bool) -> Result<(), DetectError> {
         self.rows.clear();
-        let (_, smoothed) = prep.vegetation();
+        let (smoothed, mask, cal) = (image.smoothed, image.mask, image.calibration);
         let (w, h) = (smoothed.width, smoothed.height);
-        let (Some(cal), Some((mask, _))) = (prep.working_calibration(), prep.mask()) else {
-            return Err(DetectError::Buffer(
-                "edge method: the preparer has no setup".into(),
-            ));
-        };
         let stale = match &self.detector {
             None => true,
             Some(e) => rebuilt || e.size() != (w, h),

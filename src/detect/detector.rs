@@ -23,7 +23,9 @@ use super::vanishing::{VanishingParams, VanishingStage};
 use crate::camera::{Calibration, Mounting};
 use crate::frame::ImageView;
 use nalgebra::Vector3;
+use rayon::ThreadPool;
 use std::any::Any;
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 /// What a prior on the vanishing point did in the last image
@@ -71,6 +73,8 @@ pub struct Detector {
     times: StageTimes,
     last_prepare: PrepareResult,
     last_prior: PriorOutcome,
+    /// The threads a frame's independent parts run on ([`Detector::set_threads`]).
+    pool: Option<Arc<ThreadPool>>,
 }
 
 impl Detector {
@@ -97,7 +101,27 @@ impl Detector {
             times: StageTimes::default(),
             last_prepare: PrepareResult::default(),
             last_prior: PriorOutcome::None,
+            pool: None,
         })
+    }
+
+    /// Runs each frame's independent parts on `threads` threads (built once, here): the
+    /// combined method's Hough rows beside its edge detector. 1 (the default): every part on
+    /// the calling thread. The answers are the same either way. A caller that runs frame
+    /// after frame runs its loop on the threads themselves ([`Self::pool`]'s `install`):
+    /// each frame then starts there without handing itself over, which allocates.
+    pub fn set_threads(&mut self, threads: usize) -> Result<(), DetectError> {
+        self.pool = match threads {
+            0 | 1 => None,
+            n => Some(Arc::new(
+                rayon::ThreadPoolBuilder::new()
+                    .num_threads(n)
+                    .thread_name(|i| format!("detector-{i}"))
+                    .build()
+                    .map_err(|e| DetectError::Buffer(format!("{n} detector threads: {e}")))?,
+            )),
+        };
+        Ok(())
     }
 
     /// The options in force: `auto` resolved to the method that runs, the scales derived
@@ -117,6 +141,20 @@ impl Detector {
     /// inside the window, the full search runs on the same prepared points, so the answer is
     /// never worse than without a prior. [`Detector::last_prior`] tells which happened.
     pub fn process_with_prior(
+        &mut self,
+        view: &ImageView,
+        prior: Option<&DetectorPrior>,
+        out: &mut Detection,
+    ) -> Result<(), DetectError> {
+        // On the pool's threads when there are any: the frame's parts then join within it.
+        match self.pool.clone() {
+            Some(pool) => pool.install(|| self.process_here(view, prior, out)),
+            None => self.process_here(view, prior, out),
+        }
+    }
+
+    /// [`Self::process_with_prior`] on the calling thread.
+    fn process_here(
         &mut self,
         view: &ImageView,
         prior: Option<&DetectorPrior>,
@@ -171,6 +209,7 @@ impl Detector {
             fresh,
             out,
             weights: &mut self.weights,
+            pool: self.pool.as_deref(),
         };
         let t1 = Instant::now();
         self.method.rows(&mut frame)?;
@@ -185,6 +224,11 @@ impl Detector {
         self.times.rows = t2 - t1;
         self.times.vanishing = t2.elapsed();
         Ok(())
+    }
+
+    /// The threads of [`Self::set_threads`], when more than one.
+    pub fn pool(&self) -> Option<Arc<ThreadPool>> {
+        self.pool.clone()
     }
 
     /// What the prior did in the last image.

@@ -32,6 +32,36 @@ pub struct PrepareOptions {
     pub refit: RefitOptions,
 }
 
+/// The last image at the working resolution as the stages after the preparation read it.
+#[derive(Debug, Clone, Copy)]
+pub struct PreparedImage<'a> {
+    /// The smoothed vegetation image.
+    pub smoothed: &'a GreyImage,
+    /// Its mask (0xFF = use).
+    pub mask: &'a [u8],
+    /// The calibration at the working resolution.
+    pub calibration: &'a Calibration,
+}
+
+/// The refit of rows on the last image ([`Preparer::split`]).
+pub struct Refitter<'a> {
+    img: RefitImage<'a>,
+    candidates: &'a mut Candidates,
+    fits: &'a mut RowFits,
+}
+
+impl Refitter<'_> {
+    /// As [`Preparer::refit`].
+    pub fn refit(
+        &mut self,
+        rows: &mut [Row],
+        bands: &[f64],
+        vp: Option<&Vector3<f64>>,
+    ) -> Result<usize, DetectError> {
+        refit_rows(&self.img, rows, bands, vp, self.candidates, self.fits)
+    }
+}
+
 /// What the preparation stage did.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct PrepareResult {
@@ -307,9 +337,18 @@ impl Preparer {
         bands: &[f64],
         vp: Option<&Vector3<f64>>,
     ) -> Result<usize, DetectError> {
-        let Some(s) = &self.setup else {
-            return Ok(0);
-        };
+        match self.split() {
+            Some((_, mut refitter)) => refitter.refit(rows, bands, vp),
+            None => Ok(0),
+        }
+    }
+
+    /// The last image as other stages read it, beside the refit on it, which writes only
+    /// its own scratch: the two can be used at once (the combined method's Hough rows are
+    /// refitted while the edge detector reads the image). `None` before the first image.
+    pub fn split(&mut self) -> Option<(PreparedImage<'_>, Refitter<'_>)> {
+        let near = self.near_field();
+        let s = self.setup.as_ref()?;
         let t = &self.last_threshold;
         let bg = t.median as f64
             + super::refit::BACKGROUND_FRACTION * (t.level as f64 - t.median as f64).max(0.0);
@@ -323,9 +362,19 @@ impl Preparer {
             model: &s.work_cal.model,
             background: bg.round().clamp(0.0, 254.0) as u8,
             plateau_cap: super::refit::PLATEAU_CAP,
-            near: self.near_field(),
+            near,
         };
-        refit_rows(&img, rows, bands, vp, &mut self.candidates, &mut self.fits)
+        let image = PreparedImage {
+            smoothed: &self.smoothed,
+            mask: &s.mask,
+            calibration: &s.work_cal,
+        };
+        let refitter = Refitter {
+            img,
+            candidates: &mut self.candidates,
+            fits: &mut self.fits,
+        };
+        Some((image, refitter))
     }
 
     /// The curved rows of the last refit: their points beside the robot.

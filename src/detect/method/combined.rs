@@ -11,7 +11,7 @@
 //! where they pass the robot, and the Hough rows published as the crop rows' centre lines
 //! with their widths from the boundaries ([`CentreLines`]).
 
-use super::{hough_rows, Frame, RowMethod};
+use super::{hough_rows, join, Frame, RowMethod};
 use crate::detect::boundaries::Boundaries;
 use crate::detect::centre::CentreLines;
 use crate::detect::combine::{consensus_score, PrecisionRefit, REFERENCE_PAIR_MAX_DEG};
@@ -179,11 +179,26 @@ impl CombinedMethod {
 
 impl RowMethod for CombinedMethod {
     fn rows(&mut self, frame: &mut Frame<'_>) -> Result<(), DetectError> {
-        hough_rows(&mut self.transform, frame)?;
-        if frame.fresh {
-            self.boundaries
-                .run(frame.prep, frame.prepared.setup_rebuilt)?;
-        }
+        // The Hough rows with their refit, and the edge detector's boundaries, at once:
+        // they read the same prepared image and write nothing the other reads.
+        let (rebuilt, fresh) = (frame.prepared.setup_rebuilt, frame.fresh);
+        let (image, refitter) = frame.prep.split().unzip();
+        let (transform, boundaries) = (&mut self.transform, &mut self.boundaries);
+        let (points, window, vanish) = (frame.points, frame.window, &mut *frame.vanish);
+        let out = &mut *frame.out;
+        let (hough, edge) = join(
+            frame.pool,
+            || hough_rows(transform, points, window, vanish, refitter, out),
+            || match (image, fresh) {
+                (Some(image), true) => boundaries.run(&image, rebuilt),
+                (None, true) => Err(DetectError::Buffer(
+                    "edge method: the preparer has no setup".into(),
+                )),
+                (_, false) => Ok(()),
+            },
+        );
+        hough?;
+        edge?;
         let w = self.edge_weight;
         let (hough_w, edge_w) = (1.0 - w, w);
         let (out, weights) = (&mut *frame.out, &mut *frame.weights);

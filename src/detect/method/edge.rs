@@ -146,8 +146,13 @@ impl EdgeMethod {
 impl RowMethod for EdgeMethod {
     fn rows(&mut self, frame: &mut Frame<'_>) -> Result<(), DetectError> {
         if frame.fresh {
-            self.boundaries
-                .run(frame.prep, frame.prepared.setup_rebuilt)?;
+            let rebuilt = frame.prepared.setup_rebuilt;
+            let Some((image, _)) = frame.prep.split() else {
+                return Err(DetectError::Buffer(
+                    "edge method: the preparer has no setup".into(),
+                ));
+            };
+            self.boundaries.run(&image, rebuilt)?;
             self.bend(frame)?;
         }
         frame.out.rows.extend_from_slice(&self.boundaries.rows);

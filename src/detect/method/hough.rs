@@ -30,7 +30,15 @@ impl HoughMethod {
 
 impl RowMethod for HoughMethod {
     fn rows(&mut self, frame: &mut Frame<'_>) -> Result<(), DetectError> {
-        hough_rows(&mut self.transform, frame)?;
+        let refitter = frame.prep.split().map(|(_, r)| r);
+        hough_rows(
+            &mut self.transform,
+            frame.points,
+            frame.window,
+            frame.vanish,
+            refitter,
+            frame.out,
+        )?;
         support_weights(&frame.out.rows, frame.weights);
         Ok(())
     }

@@ -21,11 +21,12 @@ pub mod pencil;
 pub mod strips;
 
 use super::hough::{HoughResult, HoughRows};
-use super::prepare::{PrepareResult, Preparer};
+use super::prepare::{PrepareResult, Preparer, Refitter};
 use super::types::{DetectError, Detection, Method, Points};
 use super::vanishing::VanishingStage;
 use crate::camera::Mounting;
 use nalgebra::Vector3;
+use rayon::ThreadPool;
 use std::any::Any;
 
 /// What a method works on in one frame.
@@ -50,6 +51,24 @@ pub struct Frame<'a> {
     /// one): evidence that does not depend on the window (the edge detector's boundaries)
     /// is kept from that run.
     pub fresh: bool,
+    /// The threads the frame's independent parts may run on (`None`: this thread alone,
+    /// [`join`]).
+    pub pool: Option<&'a ThreadPool>,
+}
+
+/// Runs `a` and `b`, at once on `pool` when there is one, else one after the other on this
+/// thread; their results either way (the same, since they share no state).
+pub fn join<A, B, RA, RB>(pool: Option<&ThreadPool>, a: A, b: B) -> (RA, RB)
+where
+    A: FnOnce() -> RA + Send,
+    B: FnOnce() -> RB + Send,
+    RA: Send,
+    RB: Send,
+{
+    match pool {
+        Some(_) => rayon::join(a, b),
+        None => (a(), b()),
+    }
 }
 
 /// A row-detection method. As `Any`, a method can be reached as its own type for its
@@ -91,21 +110,24 @@ pub fn choose(extent_rad: f64, m: &Mounting) -> Method {
     }
 }
 
-/// The Hough transform's rows of the frame into `frame.out.rows`, refitted on the image's
+/// The Hough transform's rows of the kept points into `out.rows`, refitted on the image's
 /// pixels in wedges towards the vanishing point of the rows as found: the stage the Hough
 /// and the combined methods share.
 pub fn hough_rows(
     transform: &mut HoughRows,
-    frame: &mut Frame<'_>,
+    points: &Points,
+    window: Option<(Vector3<f64>, f64)>,
+    vanish: &mut VanishingStage,
+    refitter: Option<Refitter<'_>>,
+    out: &mut Detection,
 ) -> Result<HoughResult, DetectError> {
-    transform.set_window(frame.window.as_ref().map(|(v, w)| (v, *w)));
-    let (p, out) = (frame.points, &mut *frame.out);
-    let found = transform.find_rows(&p.rays, &p.weights, &mut out.rows)?;
+    transform.set_window(window.as_ref().map(|(v, w)| (v, *w)));
+    let found = transform.find_rows(&points.rays, &points.weights, &mut out.rows)?;
     // A first vanishing point from the rows shapes the refit's bands.
-    frame.vanish.run(None, out)?;
+    vanish.run(None, out)?;
     let vp = out.vanishing_point.map(|v| v.direction);
-    frame
-        .prep
-        .refit(&mut out.rows, transform.bands(), vp.as_ref())?;
+    if let Some(mut r) = refitter {
+        r.refit(&mut out.rows, transform.bands(), vp.as_ref())?;
+    }
     Ok(found)
 }
