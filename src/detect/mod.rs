@@ -3,7 +3,7 @@
 //!
 //! A frame runs through [`Detector`] in order: the preparation ([`prepare`]: the vegetation
 //! index, smoothing, the threshold → the kept points), a method's rows ([`method`]: hough,
-//! edge, combined, strips, behind one trait), the vote for their vanishing point
+//! edge, combined, pencil, strips, behind one trait), the vote for their vanishing point
 //! ([`vanishing`]), the method's finishing steps, and heading and tilt ([`pose`]).
 //!
 //! The files are layered: [`types`] at the bottom (the results, the method list, the

@@ -3,7 +3,8 @@
 //! lenses.
 //!
 //! Owns [`CombinedMethod`]: the Hough rows ([`hough_rows`]) and the boundaries
-//! ([`Boundaries`]) weighted as the paper's eq. 5 (edge rows w·support, Hough rows
+//! ([`Boundaries`]), found at once on two threads when the detector has them ([`join`]),
+//! weighted as the paper's eq. 5 (edge rows w·support, Hough rows
 //! (1 − w)·support) in one vote; after it, a consensus among three candidates (the vote's
 //! vanishing point and those of each method's rows alone), the vanishing point refitted
 //! with each method weighted by its measured precision and the boundaries either side of a

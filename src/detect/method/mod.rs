@@ -11,8 +11,8 @@
 //!
 //! The methods: [`hough`] and [`edge`], the paper's two components; [`combined`], the
 //! paper's combination (eq. 5), the choice for omnidirectional lenses; [`strips`], the
-//! choice for forward-looking perspective cameras. [`choose`] is the rule behind
-//! `method = "auto"`.
+//! choice for forward-looking perspective cameras; [`pencil`], the choice for a narrow
+//! camera looking down. [`choose`] is the rule behind `method = "auto"`.
 
 pub mod combined;
 pub mod edge;
@@ -66,7 +66,7 @@ where
     RB: Send,
 {
     match pool {
-        Some(_) => rayon::join(a, b),
+        Some(p) => p.join(a, b),
         None => (a(), b()),
     }
 }
