@@ -39,15 +39,25 @@ pub struct RealArgs {
     /// ignores the narrowing. 0: one frame, no tracker.
     #[arg(long, value_name = "N", default_value_t = 0)]
     pub track: usize,
+    /// Threads each image's independent parts run on (the answers are the same with any
+    /// number) [default: the configuration's `[pipeline] threads`, else 2].
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u16).range(1..=16))]
+    pub threads: Option<u16>,
     /// How many of the worst images get an overlay and a line in the report.
     #[arg(long, value_name = "N", default_value_t = 12)]
     pub worst: usize,
 }
 
 pub fn run(a: RealArgs) -> anyhow::Result<ExitCode> {
-    let mut detector = match &a.config {
-        Some(p) => crate::config::Config::load(p)?.detector,
-        None => DetectorOptions::default(),
+    let (mut detector, threads) = match &a.config {
+        Some(p) => {
+            let c = crate::config::Config::load(p)?;
+            (c.detector, c.threads)
+        }
+        None => (
+            DetectorOptions::default(),
+            crate::pipeline::DEFAULT_THREADS as usize,
+        ),
     };
     if let Some(m) = a.method {
         detector.method = m;
@@ -61,6 +71,7 @@ pub fn run(a: RealArgs) -> anyhow::Result<ExitCode> {
         score: ScoreOptions::default(),
         limit: a.limit,
         track_frames: a.track,
+        threads: a.threads.map_or(threads, usize::from),
     };
     let bar = indicatif::ProgressBar::new(0).with_style(
         indicatif::ProgressStyle::with_template(

@@ -164,7 +164,8 @@ impl Detector {
             .map(|p| p.validate().map(|v| (v, p.window_rad)))
             .transpose()?;
         let t0 = Instant::now();
-        self.last_prepare = self.prep.run(view, &mut self.points)?;
+        let pool = self.pool.as_deref();
+        self.last_prepare = self.prep.run_on(view, &mut self.points, pool)?;
         self.times.prepare = t0.elapsed();
         self.last_prior = PriorOutcome::None;
         let Some((vp, w)) = window.filter(|_| self.method.narrows()) else {

@@ -7,7 +7,7 @@
 //! ([`vanishing`]), the method's finishing steps, and heading and tilt ([`pose`]).
 //!
 //! The files are layered: [`types`] at the bottom (the results, the method list, the
-//! error); the stages, each in its own file or folder ([`vegetation`], [`mask`],
+//! error) and [`bands`] (rows across the threads); the stages, each in its own file or folder ([`vegetation`], [`mask`],
 //! [`smooth`], [`threshold`], [`hough`] — the row Hough transform, [`edge`] — the edge
 //! detector, [`refit`] with [`sections`], [`vanishing`], [`pose`], [`prior`], [`centre`],
 //! [`chords`], [`combine`], [`strips`], [`scale`]); then [`prepare`], then the stages built
@@ -15,6 +15,7 @@
 //! `[detector]` configuration and its resolution for a calibration); [`detector`] on top.
 //! Each depends only on the layers below it. [`overlay`] draws a detection.
 
+pub mod bands;
 pub mod boundaries;
 pub mod centre;
 pub mod chords;

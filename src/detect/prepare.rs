@@ -12,12 +12,13 @@ use super::mask::{build_mask, find_fov, MaskOptions, MaskResult};
 use super::refit::{refit_rows, Candidates, NearFoot, RefitImage, RefitOptions, RowFits, Tiles};
 use super::sections::NearField;
 use super::smooth::{Gaussian, SmoothOptions};
-use super::threshold::{keep_brightest, ThresholdOptions, ThresholdResult};
+use super::threshold::{keep_brightest_on, ThresholdOptions, ThresholdResult};
 use super::types::{DetectError, GreyImage, Points, Row};
-use super::vegetation::{vegetation_image, working_factor, Binning, VegetationOptions};
+use super::vegetation::{vegetation_image_on, working_factor, Binning, VegetationOptions};
 use crate::camera::Calibration;
 use crate::frame::{ImageView, PixelFormat};
 use nalgebra::Vector3;
+use rayon::ThreadPool;
 
 /// What the preparation is told: the `[detector]` options it reads.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -103,6 +104,8 @@ pub struct Preparer {
     smoothed: GreyImage,
     tmp: Vec<u8>,
     kept: Vec<u32>,
+    /// The threshold's second half's kept pixels, when split across threads.
+    spare: Vec<u32>,
     /// The refit's pixels near one row (room for every valid pixel, reserved at setup).
     candidates: Candidates,
     /// Per row of the last refit: the variance of its normal along the vanishing point, and
@@ -135,6 +138,7 @@ impl Preparer {
             smoothed: GreyImage::default(),
             tmp: Vec::new(),
             kept: Vec::new(),
+            spare: Vec::new(),
             candidates: Candidates::default(),
             fits: RowFits::with_capacity(256),
             last_threshold: ThresholdResult::default(),
@@ -293,17 +297,30 @@ impl Preparer {
         view: &ImageView,
         points: &mut Points,
     ) -> Result<PrepareResult, DetectError> {
+        self.run_on(view, points, None)
+    }
+
+    /// [`Self::run`] with the vegetation image, the smoothing and the threshold split across
+    /// `pool`'s threads when there is one: the same points.
+    pub fn run_on(
+        &mut self,
+        view: &ImageView,
+        points: &mut Points,
+        pool: Option<&ThreadPool>,
+    ) -> Result<PrepareResult, DetectError> {
         let rebuilt = self.ensure_setup(view)?;
         let s = self.setup.as_ref().expect("setup just ensured");
-        vegetation_image(view, &self.opts.vegetation, s.bin2, &mut self.veg)?;
+        vegetation_image_on(view, &self.opts.vegetation, s.bin2, &mut self.veg, pool)?;
         let (w, h) = (self.veg.width, self.veg.height);
+        let (veg, smoothed) = (&self.veg.data, &mut self.smoothed.data);
         self.gauss
-            .apply(&self.veg.data, w, h, &mut self.tmp, &mut self.smoothed.data)?;
-        let thr = keep_brightest(
+            .apply_on(veg, w, h, &mut self.tmp, smoothed, pool)?;
+        let thr = keep_brightest_on(
             &self.smoothed.data,
             &s.mask,
             &self.opts.threshold,
             &mut self.kept,
+            pool.map(|p| (p, &mut self.spare)),
         )?;
         self.last_threshold = thr;
         points.rays.clear();

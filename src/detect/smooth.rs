@@ -5,9 +5,12 @@
 //! intermediate, vertical back to 8 bits. Borders replicate the edge pixel. No allocation
 //! once the caller's buffers have their size.
 
+use super::bands;
 use super::types::DetectError;
 use multiversion::multiversion;
+use rayon::ThreadPool;
 use serde::{Deserialize, Serialize};
+use std::ops::Range;
 
 /// Options of the Gaussian filter.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -89,6 +92,20 @@ impl Gaussian {
         tmp: &mut Vec<u8>,
         dst: &mut [u8],
     ) -> Result<(), DetectError> {
+        self.apply_on(src, width, height, tmp, dst, None)
+    }
+
+    /// [`Self::apply`] with each pass's rows in bands on `pool`'s threads
+    /// ([`super::bands`]) when there is one: the same image.
+    pub fn apply_on(
+        &self,
+        src: &[u8],
+        width: usize,
+        height: usize,
+        tmp: &mut Vec<u8>,
+        dst: &mut [u8],
+        pool: Option<&ThreadPool>,
+    ) -> Result<(), DetectError> {
         let n = width * height;
         if src.len() != n || dst.len() != n {
             return Err(DetectError::Buffer(format!(
@@ -102,8 +119,14 @@ impl Gaussian {
             return Ok(());
         }
         tmp.resize(n, 0);
-        horizontal(&self.kernel, src, width, tmp);
-        vertical(&self.kernel, tmp, width, height, dst);
+        let k = &self.kernel;
+        bands::rows(pool, tmp, width, &|rows, t: &mut [u8]| {
+            horizontal(k, &src[rows.start * width..rows.end * width], width, t)
+        });
+        let tmp = &tmp[..];
+        bands::rows(pool, dst, width, &|rows, d: &mut [u8]| {
+            vertical(k, tmp, width, height, rows, d)
+        });
         Ok(())
     }
 }
@@ -161,13 +184,22 @@ fn horizontal(kernel: &[u32], src: &[u8], width: usize, tmp: &mut [u8]) {
     }
 }
 
-/// The vertical pass of [`Gaussian::apply`]: the columns of `tmp` smoothed into `dst`.
+/// The vertical pass of [`Gaussian::apply`]: the columns of `tmp` smoothed into the rows
+/// `rows` of the image, which `dst` holds.
 #[multiversion(targets("x86_64+avx2"))]
-fn vertical(kernel: &[u32], tmp: &[u8], width: usize, height: usize, dst: &mut [u8]) {
+fn vertical(
+    kernel: &[u32],
+    tmp: &[u8],
+    width: usize,
+    height: usize,
+    rows: Range<usize>,
+    dst: &mut [u8],
+) {
     let r = kernel.len() / 2;
     let kw16 = |j: usize| kernel[j] as u16;
-    for y in 0..height {
-        let drow = &mut dst[y * width..(y + 1) * width];
+    let y0 = rows.start;
+    for y in rows {
+        let drow = &mut dst[(y - y0) * width..(y - y0 + 1) * width];
         let mut x0 = 0;
         while x0 < width {
             let len = CHUNK.min(width - x0);
@@ -226,6 +258,28 @@ mod tests {
             out
         };
         pass(&pass(src, true), false)
+    }
+
+    #[test]
+    fn bands_on_threads_are_the_whole_image_to_the_bit() {
+        let pool = |n| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(n)
+                .build()
+                .unwrap()
+        };
+        for (sigma, width, height) in [(1.5, 300, 211), (3.0, 97, 64), (0.8, 40, 9)] {
+            let g = Gaussian::new(&SmoothOptions { sigma_px: sigma }).unwrap();
+            let src = crate::detect::noise_bytes(0x51 ^ width as u64, width * height);
+            let (mut tmp, mut want) = (Vec::new(), vec![0u8; width * height]);
+            g.apply(&src, width, height, &mut tmp, &mut want).unwrap();
+            for n in [2, 3] {
+                let mut got = vec![0u8; width * height];
+                g.apply_on(&src, width, height, &mut tmp, &mut got, Some(&pool(n)))
+                    .unwrap();
+                assert_eq!(got, want, "sigma {sigma}, {width}x{height}, {n} threads");
+            }
+        }
     }
 
     #[test]

@@ -8,6 +8,7 @@
 //! pixels share one value (a saturated image).
 
 use super::types::DetectError;
+use rayon::ThreadPool;
 use serde::{Deserialize, Serialize};
 
 /// Options of the adaptive threshold.
@@ -79,6 +80,19 @@ pub fn keep_brightest(
     opts: &ThresholdOptions,
     out: &mut Vec<u32>,
 ) -> Result<ThresholdResult, DetectError> {
+    keep_brightest_on(image, mask, opts, out, None)
+}
+
+/// [`keep_brightest`] with the image's two halves counted and scanned at once on `pool`'s
+/// threads when there is one (`spare` holds the second half's kept pixels before they join
+/// `out`): the same pixels in the same order.
+pub fn keep_brightest_on(
+    image: &[u8],
+    mask: &[u8],
+    opts: &ThresholdOptions,
+    out: &mut Vec<u32>,
+    pool: Option<(&ThreadPool, &mut Vec<u32>)>,
+) -> Result<ThresholdResult, DetectError> {
     if image.len() != mask.len() {
         return Err(DetectError::Buffer(format!(
             "threshold: image has {} pixels, mask {}",
@@ -91,14 +105,56 @@ pub fn keep_brightest(
         return Err(DetectError::Buffer("threshold: image too large".into()));
     }
     out.clear();
-    let hist = histogram(image, mask);
-    let valid = valid_pixels(mask);
+    // the halves split at a block's start, so that each scans the blocks the whole would
+    let mid = (image.len() / 2) / BLOCK * BLOCK;
+    let halves = pool.filter(|_| mid > 0);
+    let (hist, first, valid) = match &halves {
+        Some((pool, _)) => {
+            let ((h1, v1), (h2, v2)) = pool.join(
+                || {
+                    (
+                        histogram(&image[..mid], &mask[..mid]),
+                        valid_pixels(&mask[..mid]),
+                    )
+                },
+                || {
+                    (
+                        histogram(&image[mid..], &mask[mid..]),
+                        valid_pixels(&mask[mid..]),
+                    )
+                },
+            );
+            (std::array::from_fn(|i| h1[i] + h2[i]), h1, v1 + v2)
+        }
+        None => (histogram(image, mask), [0; 256], valid_pixels(mask)),
+    };
     let median = median(&hist, image.len() as u64 - valid, valid);
     let lo = opts.min_level() as usize + 1;
     let candidates: u64 = hist[lo.min(256)..].iter().map(|&c| c as u64).sum();
     let (level, stride) = choose_level(&hist, opts.target_points() as u64, lo, candidates);
     let level_u8 = level.min(255) as u8;
-    collect_kept(image, mask, level_u8, level_u8 as usize >= lo, stride, out);
+    let level_ok = level_u8 as usize >= lo;
+    let at = |s: usize, e: usize| Scan {
+        image: &image[s..e],
+        mask: &mask[s..e],
+        first: s as u32,
+        level: level_u8,
+        level_ok,
+        stride,
+    };
+    match halves {
+        Some((pool, spare)) => {
+            // the second half starts where the first leaves the count of pixels at the level
+            let phase = phase_after(first[level_u8 as usize] as u64, stride);
+            spare.clear();
+            pool.join(
+                || at(0, mid).collect(0, out),
+                || at(mid, image.len()).collect(phase, spare),
+            );
+            out.extend_from_slice(spare);
+        }
+        None => at(0, image.len()).collect(0, out),
+    }
     Ok(ThresholdResult {
         level: level_u8,
         stride,
@@ -195,43 +251,59 @@ fn choose_level(hist: &[u32; 256], n: u64, lo: usize, candidates: u64) -> (usize
     (level, stride)
 }
 
-/// Appends to `out` the indices of the valid pixels above `level`, and, when `level_ok`,
-/// every `stride`-th pixel at it (in index order, starting with the first).
-fn collect_kept(
-    image: &[u8],
-    mask: &[u8],
+/// How many pixels at the level [`Scan::collect`] still passes over before it keeps one,
+/// after `count` pixels at the level starting from 0: it keeps the first, then every
+/// `stride`-th.
+fn phase_after(count: u64, stride: u32) -> u32 {
+    let stride = stride as u64;
+    ((stride - count % stride) % stride) as u32
+}
+
+/// A run of pixels to keep from: the image's and the mask's bytes from index `first`, the
+/// level, whether pixels at it may be kept, and every how many of them is.
+struct Scan<'a> {
+    image: &'a [u8],
+    mask: &'a [u8],
+    first: u32,
     level: u8,
     level_ok: bool,
     stride: u32,
-    out: &mut Vec<u32>,
-) {
-    // `phase` counts down to the next pixel at the level that is kept.
-    let mut phase = 0u32;
-    // Scan in blocks, skipping (with a vectorised maximum) blocks with nothing to keep.
-    for (b, (vb, mb)) in image.chunks(BLOCK).zip(mask.chunks(BLOCK)).enumerate() {
-        let max = vb.iter().zip(mb).fold(0u8, |a, (&v, &m)| a.max(v & m));
-        if max < level {
-            continue;
+}
+
+impl Scan<'_> {
+    /// Appends to `out` the indices of the valid pixels above the level, and, when
+    /// `level_ok`, every `stride`-th pixel at it (in index order); `phase`: how many pixels
+    /// at the level to pass over before the first kept one.
+    fn collect(&self, mut phase: u32, out: &mut Vec<u32>) {
+        let (level, level_ok, stride) = (self.level, self.level_ok, self.stride);
+        // Scan in blocks, skipping (with a vectorised maximum) blocks with nothing to keep.
+        let blocks = self.image.chunks(BLOCK).zip(self.mask.chunks(BLOCK));
+        for (b, (vb, mb)) in blocks.enumerate() {
+            let max = vb.iter().zip(mb).fold(0u8, |a, (&v, &m)| a.max(v & m));
+            if max < level {
+                continue;
+            }
+            // Every pixel's index is written and the end moves past the kept ones: whether
+            // a pixel is kept changes from pixel to pixel at a plant's edge, and branches on
+            // it mispredicted.
+            let start = out.len();
+            out.resize(start + vb.len(), 0);
+            let mut end = start;
+            let base = self.first + (b * BLOCK) as u32;
+            for (k, (&v, &m)) in vb.iter().zip(mb).enumerate() {
+                let v = v & m;
+                let at = (v == level) & level_ok;
+                let take_at = at & (phase == 0);
+                out[end] = base + k as u32;
+                end += ((v > level) | take_at) as usize;
+                phase = match (at, phase) {
+                    (false, p) => p,
+                    (true, 0) => stride - 1,
+                    (true, p) => p - 1,
+                };
+            }
+            out.truncate(end);
         }
-        // Every pixel's index is written and the end moves past the kept ones: whether a
-        // pixel is kept changes from pixel to pixel at a plant's edge, and branches on it
-        // mispredicted.
-        let start = out.len();
-        out.resize(start + vb.len(), 0);
-        let mut end = start;
-        for (k, (&v, &m)) in vb.iter().zip(mb).enumerate() {
-            let v = v & m;
-            let at = (v == level) & level_ok;
-            let take_at = at & (phase == 0);
-            out[end] = (b * BLOCK + k) as u32;
-            end += ((v > level) | take_at) as usize;
-            phase = match (at, phase) {
-                (false, p) => p,
-                (true, 0) => stride - 1,
-                (true, p) => p - 1,
-            };
-        }
-        out.truncate(end);
     }
 }
 
@@ -270,6 +342,66 @@ mod tests {
         assert_eq!(out, (245..255).collect::<Vec<u32>>());
         assert_eq!(r.level, 245);
         assert_eq!(r.median, 127);
+    }
+
+    #[test]
+    fn the_halves_on_two_threads_keep_the_same_pixels() {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(2)
+            .build()
+            .unwrap();
+        let mut spare = Vec::new();
+        // noise, a masked band and long runs of one value (ties thinned across the halves)
+        for seed in 0..40u64 {
+            let n = 64 * (20 + seed as usize * 7) + seed as usize;
+            let mut image = crate::detect::noise_bytes(seed, n);
+            for v in image.iter_mut().skip(n / 3).take(n / 4) {
+                *v = 200;
+            }
+            let mask: Vec<u8> = (0..n)
+                .map(|i| if (i / 97) % 5 == 1 { 0 } else { 0xFF })
+                .collect();
+            for target in [1, 37, 300, n] {
+                let opts = ThresholdOptions {
+                    target_points: Some(target.min(MAX_TARGET_POINTS)),
+                    min_level: Some(10),
+                };
+                let (mut want, mut got) = (Vec::new(), Vec::new());
+                let a = keep_brightest(&image, &mask, &opts, &mut want).unwrap();
+                let b =
+                    keep_brightest_on(&image, &mask, &opts, &mut got, Some((&pool, &mut spare)))
+                        .unwrap();
+                assert_eq!((a, &got), (b, &want), "seed {seed}, target {target}");
+            }
+        }
+        // ties: every stride-th pixel at the level, counted on across the halves
+        let (image, mask) = (vec![200u8; 1000], vec![0xFFu8; 1000]);
+        let opts = ThresholdOptions {
+            target_points: Some(70),
+            min_level: Some(10),
+        };
+        let mut got = Vec::new();
+        let r =
+            keep_brightest_on(&image, &mask, &opts, &mut got, Some((&pool, &mut spare))).unwrap();
+        assert_eq!(r.stride, 15);
+        assert!(got.windows(2).all(|w| w[1] - w[0] == 15), "{got:?}");
+    }
+
+    #[test]
+    fn the_phase_after_some_pixels_at_the_level() {
+        // kept: the 1st, the (stride + 1)-th, …; the phase counts down to the next kept
+        for stride in [1u32, 2, 3, 10] {
+            let mut phase = 0u32;
+            for count in 0..40u64 {
+                assert_eq!(
+                    phase_after(count, stride),
+                    phase,
+                    "{count} at stride {stride}"
+                );
+                phase = if phase == 0 { stride - 1 } else { phase - 1 };
+            }
+        }
+        assert_eq!(phase_after(5, u32::MAX), u32::MAX - 5);
     }
 
     #[test]

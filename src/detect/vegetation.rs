@@ -9,10 +9,13 @@
 //! (r, c) is centred at full-resolution (2r + 0.5, 2c + 0.5), which
 //! [`Calibration::rescaled`](crate::camera::Calibration::rescaled) does).
 
+use super::bands;
 use super::types::{DetectError, GreyImage};
 use crate::frame::{ImageView, PixelFormat};
 use multiversion::multiversion;
+use rayon::ThreadPool;
 use serde::{Deserialize, Serialize};
+use std::ops::Range;
 
 /// Whether full-resolution Mono8/RGB8 input is binned 2×2 before detection.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -161,6 +164,18 @@ pub fn vegetation_image(
     bin2: bool,
     out: &mut GreyImage,
 ) -> Result<VegetationResult, DetectError> {
+    vegetation_image_on(view, opts, bin2, out, None)
+}
+
+/// [`vegetation_image`] with its rows in bands on `pool`'s threads ([`super::bands`]) when
+/// there is one: the same image.
+pub fn vegetation_image_on(
+    view: &ImageView,
+    opts: &VegetationOptions,
+    bin2: bool,
+    out: &mut GreyImage,
+    pool: Option<&ThreadPool>,
+) -> Result<VegetationResult, DetectError> {
     let (w, h) = (view.width as usize, view.height as usize);
     let expected = w * h * view.format.bytes_per_pixel();
     if view.data.len() != expected {
@@ -188,29 +203,33 @@ pub fn vegetation_image(
     let layout = match (view.format, factor) {
         (PixelFormat::Mono8, 1) => {
             out.data.copy_from_slice(d);
-            None
+            return Ok(VegetationResult {
+                factor: 1,
+                width: ow,
+                height: oh,
+            });
         }
-        (PixelFormat::Mono8, _) => {
-            mono_binned(d, w, ow, oh, &mut out.data);
-            None
-        }
+        (PixelFormat::Mono8, _) => None,
         (PixelFormat::Rgb8, 1) => Some(Colour::Rgb),
         (PixelFormat::Rgb8, _) => Some(Colour::RgbBinned),
         (PixelFormat::BayerRggb8, _) => Some(Colour::Bayer),
     };
-    if let Some(layout) = layout {
+    bands::rows(pool, &mut out.data, ow, &|rows, o: &mut [u8]| {
+        let Some(layout) = layout else {
+            return mono_binned(d, w, ow, rows, o);
+        };
         // One instance per index, so that each inner loop inlines its index rather than
         // calling it through a pointer for every pixel.
-        let o = &mut out.data;
+        let (r, oh) = (rows, oh);
         match index {
-            VegetationIndex::Luma => colour(layout, d, w, oh, o, luma),
-            VegetationIndex::ChromaticExcessGreen => colour(layout, d, w, oh, o, chroma_exg),
-            VegetationIndex::ExcessGreenMinusRed => colour(layout, d, w, oh, o, exg_exr),
+            VegetationIndex::Luma => colour(layout, d, w, r, oh, o, luma),
+            VegetationIndex::ChromaticExcessGreen => colour(layout, d, w, r, oh, o, chroma_exg),
+            VegetationIndex::ExcessGreenMinusRed => colour(layout, d, w, r, oh, o, exg_exr),
             VegetationIndex::Auto | VegetationIndex::ExcessGreen => {
-                colour(layout, d, w, oh, o, exg)
+                colour(layout, d, w, r, oh, o, exg)
             }
         }
-    }
+    });
     Ok(VegetationResult {
         factor: factor as u32,
         width: ow,
@@ -218,16 +237,18 @@ pub fn vegetation_image(
     })
 }
 
-/// Mono8 input binned 2×2: column pairs of the two rows summed first (contiguous,
-/// vectorised), then the pairs of sums, in runs that fit a stack buffer.
+/// Mono8 input binned 2×2 (output rows `rows` into `out`, which holds just them): column
+/// pairs of the two rows summed first (contiguous, vectorised), then the pairs of sums, in
+/// runs that fit a stack buffer.
 #[multiversion(targets("x86_64+avx2"))]
-fn mono_binned(d: &[u8], w: usize, ow: usize, oh: usize, out: &mut [u8]) {
+fn mono_binned(d: &[u8], w: usize, ow: usize, rows: Range<usize>, out: &mut [u8]) {
     const RUN: usize = 256;
     let mut sums = [0u16; 2 * RUN];
-    for r in 0..oh {
+    let r0 = rows.start;
+    for r in rows {
         let a = &d[2 * r * w..2 * r * w + 2 * ow];
         let b = &d[(2 * r + 1) * w..(2 * r + 1) * w + 2 * ow];
-        let o = &mut out[r * ow..(r + 1) * ow];
+        let o = &mut out[(r - r0) * ow..(r - r0 + 1) * ow];
         for ((o, a), b) in o
             .chunks_mut(RUN)
             .zip(a.chunks(2 * RUN))
@@ -256,28 +277,32 @@ enum Colour {
 }
 
 /// The vegetation index `f` (R, 2G, B → byte) of colour input (`w` wide, `oh` output rows)
-/// into `out`: RGB pixel by pixel or binned 2×2, Bayer by quads.
+/// for the output rows `rows` into `out` (which holds just them): RGB pixel by pixel or
+/// binned 2×2, Bayer by quads.
 #[multiversion(targets("x86_64+avx2"))]
 fn colour(
     layout: Colour,
     d: &[u8],
     w: usize,
+    rows: Range<usize>,
     oh: usize,
     out: &mut [u8],
     f: impl Fn(i32, i32, i32) -> u8,
 ) {
+    let r0 = rows.start;
     match layout {
         Colour::Rgb => {
+            let d = &d[r0 * w * 3..rows.end * w * 3];
             for (o, p) in out.iter_mut().zip(d.chunks_exact(3)) {
                 *o = f(p[0] as i32, 2 * p[1] as i32, p[2] as i32);
             }
         }
         Colour::RgbBinned => {
             let ow = w / 2;
-            for r in 0..oh {
+            for r in rows {
                 let a = &d[2 * r * w * 3..(2 * r + 1) * w * 3];
                 let b = &d[(2 * r + 1) * w * 3..(2 * r + 2) * w * 3];
-                let o = &mut out[r * ow..(r + 1) * ow];
+                let o = &mut out[(r - r0) * ow..(r - r0 + 1) * ow];
                 for (c, v) in o.iter_mut().enumerate() {
                     let i = 6 * c;
                     let sum = |k: usize| -> i32 {
@@ -298,22 +323,31 @@ fn colour(
         // fitted centre line by a fraction of a pixel that does not average out. Red and
         // blue are interpolated (bilinearly, from the four nearest samples of each, clamped
         // at the borders) to the quad's centre.
-        Colour::Bayer => bayer_centred(d, w, oh, out, f),
+        Colour::Bayer => bayer_centred(d, w, rows, oh, out, f),
     }
 }
 
 /// The vegetation index `f` of each quad of a Bayer RGGB image (`w` wide, `oh` quad rows)
-/// into `out`, with red and blue interpolated bilinearly to the quad's centre from the four
-/// nearest samples of each (clamped at the borders).
-fn bayer_centred(d: &[u8], w: usize, oh: usize, out: &mut [u8], f: impl Fn(i32, i32, i32) -> u8) {
+/// in the quad rows `rows` into `out` (which holds just them), with red and blue
+/// interpolated bilinearly to the quad's centre from the four nearest samples of each
+/// (clamped at the borders).
+fn bayer_centred(
+    d: &[u8],
+    w: usize,
+    rows: Range<usize>,
+    oh: usize,
+    out: &mut [u8],
+    f: impl Fn(i32, i32, i32) -> u8,
+) {
     let ow = w / 2;
-    for r in 0..oh {
+    let r0 = rows.start;
+    for r in rows {
         let a = &d[2 * r * w..2 * r * w + w];
         let b = &d[(2 * r + 1) * w..(2 * r + 1) * w + w];
         // Red of the next quad row, blue of the previous one.
         let an = &d[2 * (r + 1).min(oh - 1) * w..][..w];
         let bp = &d[(2 * r.saturating_sub(1) + 1) * w..][..w];
-        let o = &mut out[r * ow..(r + 1) * ow];
+        let o = &mut out[(r - r0) * ow..(r - r0 + 1) * ow];
         let quad = |c: usize| {
             let (cn, cp) = (2 * (c + 1).min(ow - 1), 2 * c.saturating_sub(1) + 1);
             let (c0, c1) = (2 * c, 2 * c + 1);
@@ -380,6 +414,45 @@ pub fn brightness_at(view: &ImageView, row: usize, col: usize) -> u8 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn bands_on_threads_are_the_whole_image() {
+        let pool = |n| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(n)
+                .build()
+                .unwrap()
+        };
+        let (w, h) = (90usize, 134usize);
+        for format in [
+            PixelFormat::Mono8,
+            PixelFormat::Rgb8,
+            PixelFormat::BayerRggb8,
+        ] {
+            let data = crate::detect::noise_bytes(7, w * h * format.bytes_per_pixel());
+            let view = ImageView::new(w as u32, h as u32, format, &data).unwrap();
+            for (index, bin2) in [
+                (VegetationIndex::ExcessGreen, false),
+                (VegetationIndex::ExcessGreen, true),
+                (VegetationIndex::ChromaticExcessGreen, true),
+                (VegetationIndex::Luma, false),
+            ] {
+                let opts = VegetationOptions { index };
+                let mut want = GreyImage::default();
+                let a = vegetation_image(&view, &opts, bin2, &mut want).unwrap();
+                for n in [2, 3] {
+                    let mut got = GreyImage::default();
+                    let b =
+                        vegetation_image_on(&view, &opts, bin2, &mut got, Some(&pool(n))).unwrap();
+                    assert_eq!(
+                        (a, &got.data),
+                        (b, &want.data),
+                        "{format:?} {index:?} {bin2}"
+                    );
+                }
+            }
+        }
+    }
 
     #[test]
     fn rgb_excess_green() {

@@ -61,7 +61,9 @@ impl RowMethod for StripsMethod {
     fn rows(&mut self, frame: &mut Frame<'_>) -> Result<(), DetectError> {
         self.strips
             .set_window(frame.window.as_ref().map(|(v, w)| (v, *w)));
-        self.found = self.strips.find(frame.points, &mut frame.out.rows)?;
+        self.found = self
+            .strips
+            .find_on(frame.points, &mut frame.out.rows, frame.pool)?;
         support_weights(&frame.out.rows, frame.weights);
         Ok(())
     }

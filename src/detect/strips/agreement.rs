@@ -6,8 +6,10 @@
 //! standard deviation of 1. At the rows' vanishing point the peaks of one row share one u in
 //! every strip, and the agreement peaks.
 
+use super::peaks::Peak;
 use super::StripsRows;
 use multiversion::multiversion;
+use rayon::ThreadPool;
 
 /// Uncertainty (sigma, pixels) of a peak's position: the kernel's width in the agreement.
 pub(super) const PEAK_SIGMA_PX: f64 = 4.0;
@@ -59,13 +61,21 @@ impl SeenColumns {
     }
 }
 
-impl StripsRows {
-    /// Fills `self.columns` with the peaks below the candidate (a, p), sorted by u; returns
-    /// the share of the peaks' count that is there.
-    pub(super) fn see(&mut self, a: f64, p: f64) -> f64 {
+/// One thread's scratch for the agreement at candidates: the peaks seen from the last one.
+#[derive(Debug, Clone, Default)]
+pub(super) struct Sight {
+    /// The peaks below the last candidate, for the agreement's pair sums and the comb.
+    pub(super) columns: SeenColumns,
+    /// The sort keys of the peaks below a candidate (u, then the peak's index).
+    keys: Vec<u64>,
+}
+
+impl Sight {
+    /// Fills `self.columns` with the `peaks` below the candidate (a, p), sorted by u;
+    /// returns the share of the peaks' count that is there.
+    pub(super) fn see(&mut self, peaks: &[Peak], a: f64, p: f64) -> f64 {
         // the peaks are in the strips' order, deepest last: those below are the last ones
-        let first = self.peaks.partition_point(|k| k.p - p <= MIN_DEPTH_PX);
-        let peaks = &self.peaks;
+        let first = peaks.partition_point(|k| k.p - p <= MIN_DEPTH_PX);
         let key = |k: usize| sort_key((peaks[k].a - a) / (peaks[k].p - p), k);
         self.keys.clear();
         self.keys.extend((first..peaks.len()).map(key));
@@ -78,14 +88,13 @@ impl StripsRows {
             self.columns
                 .push((k.a - a) / d, PEAK_SIGMA_PX / d, k.w, k.strip);
         }
-        self.columns.len() as f64 / self.peaks.len().max(1) as f64
+        self.columns.len() as f64 / peaks.len().max(1) as f64
     }
 
-    /// The agreement of the peaks seen from (a, p) (see the module's doc); 0 with fewer than
-    /// four peaks below the point. Counts the candidate in [`super::StripsResult::evaluated`].
-    pub(super) fn agreement(&mut self, a: f64, p: f64) -> f64 {
-        self.last.evaluated += 1;
-        let share = self.see(a, p);
+    /// The agreement of the `peaks` seen from (a, p) (see the module's doc); 0 with fewer
+    /// than four peaks below the point. A function of the peaks and the point alone.
+    pub(super) fn agreement(&mut self, peaks: &[Peak], a: f64, p: f64) -> f64 {
+        let share = self.see(peaks, a, p);
         if self.columns.len() < 4 {
             return 0.0;
         }
@@ -95,6 +104,89 @@ impl StripsRows {
         }
         num / (total * total) * share
     }
+}
+
+impl StripsRows {
+    /// Fills `self.sight.columns` with the peaks below the candidate (a, p), sorted by u;
+    /// returns the share of the peaks' count that is there.
+    pub(super) fn see(&mut self, a: f64, p: f64) -> f64 {
+        self.sight.see(&self.peaks, a, p)
+    }
+
+    /// The agreement of the peaks seen from (a, p) (see the module's doc); 0 with fewer than
+    /// four peaks below the point. Counts the candidate in [`super::StripsResult::evaluated`].
+    pub(super) fn agreement(&mut self, a: f64, p: f64) -> f64 {
+        self.last.evaluated += 1;
+        self.sight.agreement(&self.peaks, a, p)
+    }
+
+    /// The agreements at the candidates `self.cand` (along, below) into `self.vals`, the
+    /// candidates split across `pool`'s threads (each with its own [`Sight`]) when there is
+    /// one: the same values as one after the other, since each is a function of the peaks
+    /// and its point alone. Counts the candidates in [`super::StripsResult::evaluated`].
+    pub(super) fn agreements(&mut self, pool: Option<&ThreadPool>) {
+        let n = self.cand.len();
+        self.last.evaluated += n;
+        self.vals.clear();
+        self.vals.resize(n, 0.0);
+        let threads = pool.map_or(1, |p| p.current_num_threads());
+        let parts = threads.min(n / MIN_CANDIDATES_PER_THREAD).max(1);
+        while self.sights.len() + 1 < parts {
+            self.sights.push(Sight::default());
+        }
+        let peaks = &self.peaks;
+        match pool {
+            Some(pool) if parts > 1 => split(
+                pool,
+                peaks,
+                &self.cand,
+                &mut self.vals,
+                &mut self.sight,
+                &mut self.sights[..parts - 1],
+            ),
+            _ => evaluate(peaks, &self.cand, &mut self.vals, &mut self.sight),
+        }
+    }
+}
+
+/// Candidates per thread below which [`StripsRows::agreements`] uses fewer threads: a
+/// candidate costs some microseconds, handing work to another thread about as much.
+const MIN_CANDIDATES_PER_THREAD: usize = 4;
+
+/// The agreements at `cand` into `vals`, on this thread.
+fn evaluate(peaks: &[Peak], cand: &[[f64; 2]], vals: &mut [f64], sight: &mut Sight) {
+    for (c, v) in cand.iter().zip(vals.iter_mut()) {
+        *v = sight.agreement(peaks, c[0], c[1]);
+    }
+}
+
+/// The agreements at `cand` into `vals`, in `rest.len() + 1` contiguous parts on `pool`'s
+/// threads, `first` and `rest` their scratch.
+fn split(
+    pool: &ThreadPool,
+    peaks: &[Peak],
+    cand: &[[f64; 2]],
+    vals: &mut [f64],
+    first: &mut Sight,
+    rest: &mut [Sight],
+) {
+    // the first `half` parts here with `first` and `rest[..half - 1]`, the others beside
+    let parts = rest.len() + 1;
+    let half = parts / 2;
+    if half == 0 {
+        return evaluate(peaks, cand, vals, first);
+    }
+    let k = cand.len() * half / parts;
+    let (ca, cb) = cand.split_at(k);
+    let (va, vb) = vals.split_at_mut(k);
+    let (ra, rb) = rest.split_at_mut(half - 1);
+    let Some((fb, rb)) = rb.split_first_mut() else {
+        return evaluate(peaks, cand, vals, first);
+    };
+    pool.join(
+        || split(pool, peaks, ca, va, first, ra),
+        || split(pool, peaks, cb, vb, fb, rb),
+    );
 }
 
 /// [`SeenColumns::pair_sum`] on the columns. Compiled also for AVX2 (four lanes in one

@@ -41,19 +41,19 @@ pub(super) const LINE_DEPTH_PX: f64 = 100.0;
 const MAX_TEETH: i64 = 4096;
 
 impl StripsRows {
-    /// The peaks' comb seen from (a, p) ([`Self::comb`], with `self.columns` filled for
+    /// The peaks' comb seen from (a, p) ([`Self::comb`], with `self.sight.columns` filled for
     /// it); `None` when no peak lies below the point.
     pub(super) fn comb_at(&mut self, a: f64, p: f64) -> Option<(f64, f64, f64)> {
         self.see(a, p);
-        (self.columns.len() > 0).then(|| self.comb())
+        (self.sight.columns.len() > 0).then(|| self.comb())
     }
 
-    /// The strongest comb of the peaks' u in `self.columns` (filled by `see`): (amplitude,
+    /// The strongest comb of the peaks' u in `self.sight.columns` (filled by `see`): (amplitude,
     /// period, phase), the amplitude their Fourier component's over their total weight.
     /// Periods from `comb_min_period` to `comb_max_period`.
     fn comb(&mut self) -> (f64, f64, f64) {
         let o = &self.opts;
-        let c = &self.columns;
+        let c = &self.sight.columns;
         let total: f64 = c.w.iter().sum();
         let ratio = (o.comb_max_period / o.comb_min_period).powf(1.0 / (COMB_PERIODS - 1) as f64);
         let mut period = o.comb_min_period;
@@ -104,12 +104,12 @@ impl StripsRows {
         }
     }
 
-    /// The teeth of the comb (`period`, `phase`) of the peaks in `self.columns`, seen from
+    /// The teeth of the comb (`period`, `phase`) of the peaks in `self.sight.columns`, seen from
     /// (a, p), that are rows, into `self.teeth` (u re-centred on its peaks, weight, number of
     /// peaks): in order across the image, or the `max_rows` heaviest when there are more.
     /// False when the comb has too many teeth across the peaks.
     fn comb_teeth(&mut self, a: f64, p: f64, period: f64, phase: f64) -> bool {
-        let c = &self.columns;
+        let c = &self.sight.columns;
         let (u0, u1) = (c.u[0], c.u[c.len() - 1]);
         let k0 = ((u0 - phase) / period).floor() as i64;
         let k1 = ((u1 - phase) / period).ceil() as i64;

@@ -42,9 +42,10 @@ mod virtual_image;
 use super::pose::RobotAxes;
 use super::types::{DetectError, Points, Row};
 use crate::camera::Mounting;
-use agreement::SeenColumns;
+use agreement::Sight;
 use nalgebra::Vector3;
 use peaks::Peak;
+use rayon::ThreadPool;
 use serde::{Deserialize, Serialize};
 
 /// The share of the working image's pixels the threshold keeps as points for this method
@@ -168,10 +169,15 @@ pub struct StripsRows {
     /// The grid's local maxima (agreement, column, row), best first; in the search, once
     /// climbed, its summits (agreement, along, below).
     starts: Vec<(f64, f64, f64)>,
-    /// The peaks below the last candidate, for the agreement's pair sums and the comb.
-    columns: SeenColumns,
-    /// The sort keys of the peaks below a candidate (u, then the peak's index).
-    keys: Vec<u64>,
+    /// This thread's scratch for the agreement (the peaks below the last candidate, for
+    /// the pair sums and the comb), and the other threads' in a parallel search.
+    sight: Sight,
+    sights: Vec<Sight>,
+    /// A batch of candidates (along, below) and their agreements.
+    cand: Vec<[f64; 2]>,
+    vals: Vec<f64>,
+    /// The search grid's cells in a batch.
+    cells: Vec<usize>,
     /// The comb's teeth that are rows: u, weight and the number of peaks on them.
     teeth: Vec<[f64; 3]>,
     /// Each strip's centre (below) and the extent of its points (along from, to).
@@ -221,8 +227,11 @@ impl StripsRows {
             grid: Vec::new(),
             prior: None,
             starts: Vec::new(),
-            columns: SeenColumns::default(),
-            keys: Vec::new(),
+            sight: Sight::default(),
+            sights: Vec::new(),
+            cand: Vec::new(),
+            vals: Vec::new(),
+            cells: Vec::new(),
             teeth: Vec::new(),
             spans: Vec::new(),
             last: StripsResult::default(),
@@ -246,6 +255,17 @@ impl StripsRows {
         points: &Points,
         rows: &mut Vec<Row>,
     ) -> Result<Option<Vector3<f64>>, DetectError> {
+        self.find_on(points, rows, None)
+    }
+
+    /// [`Self::find`] with the search's candidates evaluated on `pool`'s threads when there
+    /// is one: the same rows and vanishing point.
+    pub fn find_on(
+        &mut self,
+        points: &Points,
+        rows: &mut Vec<Row>,
+        pool: Option<&ThreadPool>,
+    ) -> Result<Option<Vector3<f64>>, DetectError> {
         points.check("strips")?;
         let (rays, weights, pixel_rad) = (&points.rays, &points.weights, &points.pixel_rad);
         rows.clear();
@@ -257,7 +277,7 @@ impl StripsRows {
         // the search on the strips' peaks as they are, the comb on them straightened
         self.read_peaks(None);
         self.last.peaks = self.peaks.len();
-        let Some((av, pv, agreement)) = self.search() else {
+        let Some((av, pv, agreement)) = self.search(pool) else {
             return Ok(None);
         };
         self.read_peaks(Some((av, pv)));

@@ -6,6 +6,7 @@
 
 use super::StripsRows;
 use nalgebra::Vector3;
+use rayon::ThreadPool;
 
 /// Step of the search's grid of candidate vanishing points (pixels), halved down to 1 px
 /// in the climb.
@@ -59,7 +60,8 @@ impl StripsRows {
     /// `None` also when the box's best lies on an edge the box adds to the window: the
     /// agreement still rises beyond it, so the rows' vanishing point is outside the prior's
     /// window.
-    pub(super) fn search(&mut self) -> Option<(f64, f64, f64)> {
+    /// The candidates are evaluated on `pool`'s threads when there is one (the same answer).
+    pub(super) fn search(&mut self, pool: Option<&ThreadPool>) -> Option<(f64, f64, f64)> {
         if self.peaks.len() < 4 {
             return None;
         }
@@ -70,7 +72,7 @@ impl StripsRows {
             return None;
         }
         let (a0, p0) = (bx[0], bx[2]);
-        self.fill_grid(a0, p0, na, np, step, regions);
+        self.fill_grid([a0, p0, step], na, np, regions, pool);
         // the grid's best local maxima, each refined by halving steps
         self.grid_maxima(na, np, 1);
         self.starts.truncate(SEARCH_STARTS);
@@ -80,7 +82,7 @@ impl StripsRows {
         // each start climbed, in place: (agreement, along, below)
         for k in 0..self.starts.len() {
             let (e, i, j) = self.starts[k];
-            self.starts[k] = self.refine((e, a0 + i * step, p0 + j * step), step);
+            self.starts[k] = self.refine((e, a0 + i * step, p0 + j * step), step, pool);
         }
         let summits = std::mem::take(&mut self.starts);
         let best = pick_summit(&summits, SEARCH_COMB_POWER, SEARCH_COMB_REACH_PX, |a, p| {
@@ -183,36 +185,70 @@ impl StripsRows {
         self.prior = window.map(|(vp, w)| (vp.normalize(), w));
     }
 
-    /// The agreement on the grid of `na` × `np` candidates `step` apart from (a0, p0) into
-    /// `self.grid`. With `regions` > 0 only where it can hold the grid's best: every other
-    /// candidate first (a grid twice as coarse), then the full grid within one coarse step
-    /// of that coarse grid's `regions` best local maxima; the candidates not evaluated are
-    /// NaN, and so neither a maximum nor higher than one.
-    fn fill_grid(&mut self, a0: f64, p0: f64, na: usize, np: usize, step: f64, regions: usize) {
+    /// The agreement on the grid of `na` × `np` candidates `step` apart from (a0, p0) (`at`:
+    /// a0, p0, step) into `self.grid`. With `regions` > 0 only where it can hold the grid's
+    /// best: every other candidate first (a grid twice as coarse), then the full grid within
+    /// one coarse step of that coarse grid's `regions` best local maxima; the candidates not
+    /// evaluated are NaN, and so neither a maximum nor higher than one. Each pass's
+    /// candidates are evaluated at once on `pool`'s threads.
+    fn fill_grid(
+        &mut self,
+        at: [f64; 3],
+        na: usize,
+        np: usize,
+        regions: usize,
+        pool: Option<&ThreadPool>,
+    ) {
         self.grid.clear();
         self.grid.resize(na * np, f64::NAN);
         let stride = if regions == 0 { 1 } else { 2 };
-        for j in (0..np).step_by(stride) {
-            for i in (0..na).step_by(stride) {
-                self.grid[j * na + i] = self.agreement(a0 + i as f64 * step, p0 + j as f64 * step);
+        // the rows interleaved, so that the threads' contiguous shares see alike candidates
+        let parts = pool.map_or(1, |p| p.current_num_threads()).max(1);
+        let rows = np.div_ceil(stride);
+        self.cells.clear();
+        for phase in 0..parts.min(rows) {
+            for r in (phase..rows).step_by(parts) {
+                let j = r * stride;
+                self.cells
+                    .extend((0..na).step_by(stride).map(|i| j * na + i));
             }
         }
+        self.evaluate_cells(at, na, pool);
         if regions == 0 {
             return;
         }
         self.grid_maxima(na, np, 2);
         self.starts.truncate(regions);
+        self.cells.clear();
         for k in 0..self.starts.len() {
             let (_, ci, cj) = self.starts[k];
             let (ci, cj) = (ci as usize, cj as usize);
             for j in cj.saturating_sub(2)..(cj + 3).min(np) {
                 for i in ci.saturating_sub(2)..(ci + 3).min(na) {
                     if self.grid[j * na + i].is_nan() {
-                        self.grid[j * na + i] =
-                            self.agreement(a0 + i as f64 * step, p0 + j as f64 * step);
+                        // queued (no longer NaN, so queued once)
+                        self.grid[j * na + i] = -1.0;
+                        self.cells.push(j * na + i);
                     }
                 }
             }
+        }
+        self.evaluate_cells(at, na, pool);
+    }
+
+    /// The agreement at each grid cell in `self.cells` (`at`: the grid's a0, p0 and step;
+    /// `na` its columns) into `self.grid`.
+    fn evaluate_cells(&mut self, at: [f64; 3], na: usize, pool: Option<&ThreadPool>) {
+        let [a0, p0, step] = at;
+        self.cand.clear();
+        self.cand.extend(
+            self.cells
+                .iter()
+                .map(|&c| [a0 + (c % na) as f64 * step, p0 + (c / na) as f64 * step]),
+        );
+        self.agreements(pool);
+        for (&c, &v) in self.cells.iter().zip(&self.vals) {
+            self.grid[c] = v;
         }
     }
 
@@ -245,16 +281,26 @@ impl StripsRows {
     }
 
     /// A grid point (agreement, along, below) climbed by halving steps from `step` / 2
-    /// down to 1 px.
-    fn refine(&mut self, mut here: (f64, f64, f64), step: f64) -> (f64, f64, f64) {
+    /// down to 1 px; each step's eight neighbours evaluated at once on `pool`'s threads.
+    fn refine(
+        &mut self,
+        mut here: (f64, f64, f64),
+        step: f64,
+        pool: Option<&ThreadPool>,
+    ) -> (f64, f64, f64) {
         let mut st = 0.5 * step;
         while st >= 1.0 {
             let (_, ca, cp) = here;
-            for (da, dp) in NEIGHBOURS {
-                let (a, p) = (ca + da * st, cp + dp * st);
-                let e = self.agreement(a, p);
+            self.cand.clear();
+            self.cand.extend(
+                NEIGHBOURS
+                    .iter()
+                    .map(|&(da, dp)| [ca + da * st, cp + dp * st]),
+            );
+            self.agreements(pool);
+            for (c, &e) in self.cand.iter().zip(&self.vals) {
                 if e > here.0 {
-                    here = (e, a, p);
+                    here = (e, c[0], c[1]);
                 }
             }
             st *= 0.5;
@@ -284,7 +330,7 @@ impl StripsRows {
         self.read_peaks(None);
         let mut here = (self.agreement(a, p), a, p);
         for _ in 0..CLIMB_ROUNDS {
-            here = self.refine(here, SEARCH_STEP_PX);
+            here = self.refine(here, SEARCH_STEP_PX, None);
             if (here.1, here.2) == (a, p) {
                 break;
             }
@@ -392,7 +438,7 @@ mod tests {
         let (na, np) = grid_size(&bx, SEARCH_STEP_PX);
         let mut best = |regions: usize| {
             let before = s.last.evaluated;
-            s.fill_grid(bx[0], bx[2], na, np, SEARCH_STEP_PX, regions);
+            s.fill_grid([bx[0], bx[2], SEARCH_STEP_PX], na, np, regions, None);
             s.grid_maxima(na, np, 1);
             (s.starts[0], s.last.evaluated - before)
         };
@@ -400,6 +446,34 @@ mod tests {
         let (coarse, n) = best(SEARCH_REGIONS);
         assert_eq!(coarse, full);
         assert!(3 * n < n_full, "{n} candidates evaluated against {n_full}");
+    }
+
+    #[test]
+    fn the_search_on_threads_is_the_search_on_one() {
+        let (m, fld) = weedy_field();
+        let pts = fld.points();
+        let mut rows = Vec::new();
+        let mut one = StripsRows::new(StripsOptions::default(), 15.0, &m).unwrap();
+        let want = one
+            .find(&pts, &mut rows)
+            .unwrap()
+            .expect("a vanishing point");
+        let (want_rows, want_last) = (rows.clone(), one.last());
+        let want_grid = one.grid.clone();
+        for n in [2, 3] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(n)
+                .build()
+                .unwrap();
+            let mut s = StripsRows::new(StripsOptions::default(), 15.0, &m).unwrap();
+            let got = s.find_on(&pts, &mut rows, Some(&pool)).unwrap();
+            assert_eq!(got, Some(want), "{n} threads");
+            assert_eq!(rows, want_rows, "{n} threads");
+            assert_eq!(s.last(), want_last, "{n} threads");
+            // every candidate the same to the bit, the unevaluated ones too
+            let bits = |g: &[f64]| g.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&s.grid), bits(&want_grid), "{n} threads");
+        }
     }
 
     #[test]

@@ -58,6 +58,8 @@ pub struct RealEvalOptions {
     /// through the node's tracker with the search narrowed by its prediction (as
     /// `[pipeline] narrow_search = true`); the last frame is scored.
     pub track_frames: usize,
+    /// Threads each image's independent parts run on ([`PerceptionOptions::threads`]).
+    pub threads: usize,
 }
 
 /// What happened on one image.
@@ -248,6 +250,7 @@ pub fn run(
     let step = PerceptionOptions {
         detector: opts.detector.clone(),
         narrow_search: true,
+        threads: opts.threads,
         ..PerceptionOptions::default()
     };
     let mut perception = Perception::new(&opts.calibration, &step)?;
