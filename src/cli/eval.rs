@@ -87,6 +87,11 @@ pub struct GuidanceArgs {
     /// weaving, the crossing, an empty stretch and the rows' end; for long runs).
     #[arg(long, value_delimiter = ',', default_values_t = eval::guidance::DEFAULT_DRIVES.map(String::from))]
     pub drives: Vec<String>,
+    /// Threads each frame's independent parts run on (the answers are the same with any
+    /// number; the node's `[pipeline] threads`).
+    #[arg(long, value_name = "N", default_value_t = crate::pipeline::DEFAULT_THREADS as u16,
+          value_parser = clap::value_parser!(u16).range(1..=16))]
+    pub threads: u16,
 }
 
 /// `omnirow eval guidance`.
@@ -114,7 +119,12 @@ fn guidance(a: GuidanceArgs) -> anyhow::Result<ExitCode> {
         .filter(|s| a.drives.iter().any(|d| d == s.name))
     {
         eprintln!("eval guidance: {} ({} frames)", s.name, s.frames);
-        scores.push(eval::guidance::run_drive(&s, &detector, !a.no_narrow)?);
+        scores.push(eval::guidance::run_drive(
+            &s,
+            &detector,
+            !a.no_narrow,
+            a.threads.into(),
+        )?);
     }
     let command: Vec<String> = std::env::args().collect();
     let command = format!("omnirow {}", command[1..].join(" "));

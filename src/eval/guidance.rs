@@ -162,11 +162,13 @@ fn quantile(v: &mut [f64], p: f64) -> f64 {
 
 /// Runs one drive through the perception step (the detector with `detector` options, the
 /// row fit and guidance); with `narrow`, each frame's search is narrowed by the tracker's
-/// prediction as the node's pipeline does ([`crate::perception::NarrowSearch`]).
+/// prediction as the node's pipeline does ([`crate::perception::NarrowSearch`]); each
+/// frame's independent parts on `threads` threads.
 pub fn run_drive(
     s: &Scenario,
     detector: &DetectorOptions,
     narrow: bool,
+    threads: usize,
 ) -> Result<DriveScore, GuidanceEvalError> {
     let fail = |problem: String| GuidanceEvalError::Drive {
         drive: s.name.to_string(),
@@ -177,6 +179,7 @@ pub fn run_drive(
     let opts = PerceptionOptions {
         detector: detector.clone(),
         narrow_search: narrow,
+        threads,
         ..PerceptionOptions::default()
     };
     let mut perception = Perception::new(&cal, &opts).map_err(|e| fail(e.to_string()))?;
@@ -403,7 +406,7 @@ mod tests {
     fn a_short_weaving_drive_scores_within_the_targets_and_writes_its_files() {
         let mut s = scenarios(306, 256, 1.0).remove(0);
         s.frames = 8;
-        let d = run_drive(&s, &DetectorOptions::default(), true).unwrap();
+        let d = run_drive(&s, &DetectorOptions::default(), true, 2).unwrap();
         assert_eq!(d.frames, 8);
         assert_eq!(d.estimated, 8);
         assert_eq!(d.row_jumps, 0);
