@@ -101,6 +101,27 @@ fn eval_rejects_unknown_methods_and_bad_lenses() {
     let run = omnirow(&["eval", "--quick", "--lens", "/nonexistent/lens.txt"]);
     assert!(!run.status.success());
     assert!(String::from_utf8_lossy(&run.stderr).contains("/nonexistent/lens.txt"));
+    // thread counts outside 1..=16 are named
+    for args in [
+        &["eval", "guidance", "--threads", "0"][..],
+        &[
+            "eval",
+            "real",
+            "--images",
+            ".",
+            "--labels",
+            ".",
+            "--calib",
+            "x",
+            "--threads",
+            "17",
+        ],
+    ] {
+        let run = omnirow(args);
+        assert!(!run.status.success(), "{args:?}");
+        let err = String::from_utf8_lossy(&run.stderr);
+        assert!(err.contains("--threads"), "{args:?}: {err}");
+    }
 }
 
 /// The seed in outcomes.jsonl renders the Table II image again with `omnirow synth`, and
