@@ -2,8 +2,8 @@
 //! synthetic plants.
 //!
 //! Owns [`PhotoGround`]: a perspective photograph of straight rows with its rows labelled,
-//! rectified onto the ground ([`Rectification`]: rows along x at y = k·spacing), the largest
-//! rectangle between two rows that the photograph sees sharply enough ([`Region`]), and that
+//! rectified onto the ground ([`Rectification`]: rows along x at y = k·spacing), a rectangle
+//! between two rows that the photograph sees sharply enough ([`Region`]), and that
 //! rectangle as a mirrored, mip-mapped texture ([`MirrorTexture`]) giving the ground's colour
 //! g(x, y) anywhere on the plane. Built once; sampling allocates nothing. The labels arrive as
 //! plain (row, col) polylines: reading label files is the caller's (the CLI reads them with
@@ -65,6 +65,10 @@ pub struct PhotoOptions {
     pub texel_m: f64,
     /// The rectangle keeps this many pixels from the photograph's edges.
     pub margin_px: f64,
+    /// The rectangle spans at most this many row spacings across (1: the strip between the
+    /// two rows nearest the camera; wider shows more of the photograph, with the plants'
+    /// lean away from the camera displacing the outer rows).
+    pub max_band_spacings: usize,
 }
 
 impl Default for PhotoOptions {
@@ -76,12 +80,13 @@ impl Default for PhotoOptions {
             max_length_m: 10.0,
             texel_m: 0.005,
             margin_px: 2.0,
+            max_band_spacings: 1,
         }
     }
 }
 
 /// The rectangle of the ground a texture is cut from: x along the rows, y across them (its
-/// sides across lie on rows or midway between two, so that mirroring keeps rows at k·spacing).
+/// sides along the rows lie on rows, so that mirroring keeps rows at k·spacing).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Region {
     pub x: [f64; 2],
@@ -134,9 +139,11 @@ impl PhotoGround {
         }
         let rect = Rectification::new(rows, photo.width, photo.height, &opts.rectify)?;
         let region = usable_region(&rect, photo.width, photo.height, opts)?;
-        let tau = opts.texel_m;
+        // Texels fit the band across exactly, so that the mirror seams lie on its rows.
+        let across = region.y[1] - region.y[0];
+        let nrows = (across / opts.texel_m).round().max(1.0) as usize;
+        let tau = across / nrows as f64;
         let cols = ((region.x[1] - region.x[0]) / tau).round().max(1.0) as usize;
-        let nrows = ((region.y[1] - region.y[0]) / tau).round().max(1.0) as usize;
         // Each texel: the mean of 2×2 points of the photograph inside it.
         let texture = MirrorTexture::new([region.x[0], region.y[0]], cols, nrows, tau, |x, y| {
             let mut acc = [0.0f32; 3];
@@ -187,9 +194,70 @@ impl PhotoGround {
     }
 }
 
-/// The largest rectangle between two rows (its sides on rows or midway between them) that
-/// lies inside the photograph, `margin_px` from its edges, sampled finer than
-/// `max_sampling_m` and at least `min_length_m` long (cut to `max_length_m`).
+/// What one band across the rows offers along x: its longest stretch in view and sampled
+/// finely enough (start, length, coarsest sampling), and, for the rejection's message, the
+/// longest stretch in view and the finest sampling met.
+struct BandRun {
+    sharp: Option<(f64, f64, f64)>,
+    in_view_m: f64,
+    finest_m: f64,
+}
+
+/// Scans band `y` (metres across) along x from the camera's foot in 1 cm steps.
+fn band_run(
+    rect: &Rectification,
+    y: [f64; 2],
+    width: u32,
+    height: u32,
+    opts: &PhotoOptions,
+) -> BandRun {
+    let m = opts.margin_px;
+    let inside = |x: f64, y: f64| {
+        rect.to_image(x, y).is_some_and(|[r, c]| {
+            r >= m && c >= m && r <= height as f64 - 1.0 - m && c <= width as f64 - 1.0 - m
+        })
+    };
+    let dx = 0.01;
+    let steps = (60.0 * rect.camera_height_m / dx).clamp(100.0, 20_000.0) as usize;
+    let mut out = BandRun {
+        sharp: None,
+        in_view_m: 0.0,
+        finest_m: f64::INFINITY,
+    };
+    let (mut run_view, mut run_sharp) = (0usize, None::<(usize, f64)>);
+    for i in 0..steps {
+        let x = i as f64 * dx;
+        if !(inside(x, y[0]) && inside(x, y[1])) {
+            run_view = 0;
+            run_sharp = None;
+            continue;
+        }
+        run_view += 1;
+        out.in_view_m = out.in_view_m.max(run_view as f64 * dx);
+        let gsd = rect
+            .ground_sampling_m(x, y[0])
+            .max(rect.ground_sampling_m(x, y[1]));
+        out.finest_m = out.finest_m.min(gsd);
+        if gsd > opts.max_sampling_m {
+            run_sharp = None;
+            continue;
+        }
+        let run = run_sharp.get_or_insert((i, 0.0));
+        run.1 = run.1.max(gsd);
+        let (start, worst) = *run;
+        let length = ((i - start) as f64 * dx).min(opts.max_length_m);
+        if out.sharp.is_none_or(|b| length > b.1) {
+            out.sharp = Some((start as f64 * dx, length, worst));
+        }
+    }
+    out
+}
+
+/// The band of ground the texture is cut from: between two rows (its sides on rows, so that
+/// mirroring makes every row symmetric about its labelled line), at most
+/// `max_band_spacings` wide, in view at least `min_length_m` along the rows sampled finer
+/// than `max_sampling_m` (cut to `max_length_m`); of those, the one nearest the camera's
+/// lateral position (least parallax from the plants' height), then the largest.
 fn usable_region(
     rect: &Rectification,
     width: u32,
@@ -201,63 +269,35 @@ fn usable_region(
         .row_index
         .iter()
         .fold((i64::MAX, i64::MIN), |(a, b), &k| (a.min(k), b.max(k)));
-    let m = opts.margin_px;
-    let inside = |x: f64, y: f64| {
-        rect.to_image(x, y).is_some_and(|[r, c]| {
-            r >= m && c >= m && r <= height as f64 - 1.0 - m && c <= width as f64 - 1.0 - m
-        })
-    };
-    // Along x from the camera's foot to far beyond any useful resolution, in 1 cm steps.
-    let dx = 0.01;
-    let steps = (60.0 * rect.camera_height_m / dx).clamp(100.0, 20_000.0) as usize;
-    let (mut best, mut best_in_view, mut finest) = (None::<(f64, Region)>, 0.0f64, f64::INFINITY);
+    let cam = rect.camera_y_m;
+    let (mut best, mut in_view, mut finest) = (None::<(f64, f64, Region)>, 0.0f64, f64::INFINITY);
     for lo in k_lo..k_hi {
-        for hi in lo + 1..=k_hi {
-            for half in [0.0, 0.5] {
-                let y = [(lo as f64 - half) * s, (hi as f64 + half) * s];
-                // Longest runs of x in view, and in view and sharp.
-                let (mut run_view, mut run_sharp) = (0usize, None::<(usize, f64)>);
-                for i in 0..steps {
-                    let x = i as f64 * dx;
-                    if !(inside(x, y[0]) && inside(x, y[1])) {
-                        run_view = 0;
-                        run_sharp = None;
-                        continue;
-                    }
-                    run_view += 1;
-                    best_in_view = best_in_view.max(run_view as f64 * dx);
-                    let gsd = rect
-                        .ground_sampling_m(x, y[0])
-                        .max(rect.ground_sampling_m(x, y[1]));
-                    finest = finest.min(gsd);
-                    if gsd > opts.max_sampling_m {
-                        run_sharp = None;
-                        continue;
-                    }
-                    let run = run_sharp.get_or_insert((i, 0.0));
-                    run.1 = run.1.max(gsd);
-                    let (start, worst) = *run;
-                    let length = ((i - start) as f64 * dx).min(opts.max_length_m);
-                    let area = length * (y[1] - y[0]);
-                    if length >= opts.min_length_m && best.is_none_or(|b| area > b.0) {
-                        let x0 = start as f64 * dx;
-                        best = Some((
-                            area,
-                            Region {
-                                x: [x0, x0 + length],
-                                y,
-                                worst_sampling_m: worst,
-                            },
-                        ));
-                    }
-                }
+        for hi in lo + 1..=k_hi.min(lo + opts.max_band_spacings.max(1) as i64) {
+            let y = [lo as f64 * s, hi as f64 * s];
+            let run = band_run(rect, y, width, height, opts);
+            in_view = in_view.max(run.in_view_m);
+            finest = finest.min(run.finest_m);
+            let Some((x0, length, worst)) = run.sharp.filter(|r| r.1 >= opts.min_length_m) else {
+                continue;
+            };
+            let away = (y[0] - cam).max(cam - y[1]).max(0.0);
+            let area = length * (y[1] - y[0]);
+            let better =
+                best.is_none_or(|(a, b, _)| away < a - 1e-9 || (away <= a + 1e-9 && area > b));
+            if better {
+                let region = Region {
+                    x: [x0, x0 + length],
+                    y,
+                    worst_sampling_m: worst,
+                };
+                best = Some((away, area, region));
             }
         }
     }
     match best {
-        Some((_, r)) => Ok(r),
-        None if best_in_view < opts.min_length_m => Err(Rejection::Geometry(format!(
-            "the photograph sees at most {best_in_view:.2} m of ground between two rows (at least {} m needed)",
+        Some((_, _, r)) => Ok(r),
+        None if in_view < opts.min_length_m => Err(Rejection::Geometry(format!(
+            "the photograph sees at most {in_view:.2} m of ground between two rows (at least {} m needed)",
             opts.min_length_m
         ))),
         None => Err(Rejection::Resolution {

@@ -87,6 +87,21 @@ pub enum Rejection {
     Geometry(String),
 }
 
+impl Rejection {
+    /// A short name of the reason, for counting rejections.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Rejection::TooFewRows { .. } => "too few rows",
+            Rejection::NotStraight { .. } => "rows not straight",
+            Rejection::NotConcurrent { .. } => "no common vanishing point",
+            Rejection::NotAhead { .. } => "vanishing point not above the rows",
+            Rejection::Uneven { .. } => "spacing uneven",
+            Rejection::Resolution { .. } => "too little resolution",
+            Rejection::Geometry(_) => "geometry",
+        }
+    }
+}
+
 /// One labelled row fitted as a line.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RowLine {
