@@ -429,8 +429,6 @@ fn shade_row_photo(
     channels: usize,
 ) {
     let (w, cw) = (geo.width, geo.width + 1);
-    let p = &scene.palette;
-    let grey = scene.options.style == Style::Grey;
     let c0 = scene.pose.centre;
     let (lo, hi) = geo.spans[r];
     out[..lo * channels].fill(0);
@@ -470,21 +468,7 @@ fn shade_row_photo(
                 let v = (jj as f64 + 0.5) / n as f64;
                 let d = (k[0].dir * (1.0 - v) + k[1].dir * v) * (1.0 - u)
                     + (k[2].dir * (1.0 - v) + k[3].dir * v) * u;
-                let c = if d.z >= 0.0 {
-                    if grey {
-                        [p.grey_soil; 3]
-                    } else {
-                        p.sky_rgb((d.z / d.norm()) as f32)
-                    }
-                } else {
-                    let t = c0.z / -d.z;
-                    let g = photo.colour(c0.x + t * d.x, c0.y + t * d.y, size);
-                    if grey {
-                        [0.299 * g[0] + 0.587 * g[1] + 0.114 * g[2]; 3]
-                    } else {
-                        g
-                    }
-                };
+                let c = photo_ray(scene, photo, &c0, &d, size);
                 for k in 0..3 {
                     acc[k] += c[k] * inv;
                 }
@@ -493,6 +477,34 @@ fn shade_row_photo(
         for (o, a) in px.iter_mut().zip(acc) {
             *o = to_byte(a);
         }
+    }
+}
+
+/// Colour (grey in all channels for the grey style) of the world ray `d` from `centre` over
+/// a photograph's ground, the texture averaged over `size` metres.
+#[inline]
+fn photo_ray(
+    scene: &Scene,
+    photo: &PhotoGround,
+    centre: &Vector3<f64>,
+    d: &Vector3<f64>,
+    size: f64,
+) -> [f32; 3] {
+    let p = &scene.palette;
+    let grey = scene.options.style == Style::Grey;
+    if d.z >= 0.0 {
+        return if grey {
+            [p.grey_soil; 3]
+        } else {
+            p.sky_rgb((d.z / d.norm()) as f32)
+        };
+    }
+    let t = centre.z / -d.z;
+    let g = photo.colour(centre.x + t * d.x, centre.y + t * d.y, size);
+    if grey {
+        [0.299 * g[0] + 0.587 * g[1] + 0.114 * g[2]; 3]
+    } else {
+        g
     }
 }
 

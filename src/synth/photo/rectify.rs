@@ -310,44 +310,7 @@ impl Rectification {
             }
             gy.push(g.y / g.z);
         }
-        let mut order: Vec<usize> = (0..gy.len()).collect();
-        order.sort_by(|&a, &b| gy[a].total_cmp(&gy[b]));
-        let mut gaps: Vec<f64> = order.windows(2).map(|w| gy[w[1]] - gy[w[0]]).collect();
-        gaps.sort_by(f64::total_cmp);
-        // The smallest gap is one spacing: a row missing from the labels leaves a double gap.
-        let unit = gaps[0];
-        if unit.is_nan() || unit <= 1e-9 {
-            return Err(Rejection::Geometry(
-                "two labelled rows lie on the same line".into(),
-            ));
-        }
-        let base = gy[order[0]];
-        let k: Vec<i64> = gy
-            .iter()
-            .map(|&g| ((g - base) / unit).round() as i64)
-            .collect();
-        let mut sorted_k: Vec<i64> = order.iter().map(|&i| k[i]).collect();
-        sorted_k.dedup();
-        if sorted_k.len() != k.len() {
-            let limit_m = opts.evenness * s;
-            return Err(Rejection::Uneven {
-                worst_m: 0.5 * s,
-                limit_m,
-                spacing_m: s,
-            });
-        }
-        // gy = a + b·k by least squares; the camera height is spacing / b.
-        let n = k.len() as f64;
-        let mk = k.iter().sum::<i64>() as f64 / n;
-        let mg = gy.iter().sum::<f64>() / n;
-        let skk: f64 = k.iter().map(|&x| (x as f64 - mk).powi(2)).sum();
-        let skg: f64 = k
-            .iter()
-            .zip(&gy)
-            .map(|(&x, &g)| (x as f64 - mk) * (g - mg))
-            .sum();
-        let b = skg / skk;
-        let a = mg - b * mk;
+        let (k, a, b) = even_fit(&gy, s, opts.evenness)?;
         let height = s / b;
         let residual: Vec<f64> = k
             .iter()
@@ -410,6 +373,48 @@ impl Rectification {
         };
         step(1.0, 0.0).max(step(0.0, 1.0))
     }
+}
+
+/// The rows' indices k and the line gy = a + b·k through their lateral positions `gy`
+/// (camera height 1), the smallest gap taken as one spacing (a row missing from the labels
+/// leaves a double gap). Rejects rows that fall on one index.
+fn even_fit(gy: &[f64], s: f64, evenness: f64) -> Result<(Vec<i64>, f64, f64), Rejection> {
+    let mut order: Vec<usize> = (0..gy.len()).collect();
+    order.sort_by(|&a, &b| gy[a].total_cmp(&gy[b]));
+    let unit = order
+        .windows(2)
+        .map(|w| gy[w[1]] - gy[w[0]])
+        .fold(f64::INFINITY, f64::min);
+    if unit.is_nan() || unit <= 1e-9 {
+        return Err(Rejection::Geometry(
+            "two labelled rows lie on the same line".into(),
+        ));
+    }
+    let base = gy[order[0]];
+    let k: Vec<i64> = gy
+        .iter()
+        .map(|&g| ((g - base) / unit).round() as i64)
+        .collect();
+    let mut sorted_k: Vec<i64> = order.iter().map(|&i| k[i]).collect();
+    sorted_k.dedup();
+    if sorted_k.len() != k.len() {
+        return Err(Rejection::Uneven {
+            worst_m: 0.5 * s,
+            limit_m: evenness * s,
+            spacing_m: s,
+        });
+    }
+    let n = k.len() as f64;
+    let mk = k.iter().sum::<i64>() as f64 / n;
+    let mg = gy.iter().sum::<f64>() / n;
+    let skk: f64 = k.iter().map(|&x| (x as f64 - mk).powi(2)).sum();
+    let skg: f64 = k
+        .iter()
+        .zip(gy)
+        .map(|(&x, &g)| (x as f64 - mk) * (g - mg))
+        .sum();
+    let b = skg / skk;
+    Ok((k, mg - b * mk, b))
 }
 
 /// Scan lines a polyline spans.
