@@ -9,7 +9,7 @@
 //! after rectification must be evenly spaced within a tolerance. Every reason to refuse a
 //! photograph is a [`Rejection`].
 
-use nalgebra::{Matrix3, SymmetricEigen, Vector3};
+use nalgebra::{Matrix2, Matrix3, SymmetricEigen, Vector3};
 
 /// How a photograph is rectified, and what it must satisfy.
 #[derive(Debug, Clone, PartialEq)]
@@ -166,19 +166,35 @@ impl RowLine {
     }
 }
 
-/// The least-squares common point (homogeneous: col, row, w) of lines with unit normals.
+/// The common point (homogeneous: col, row, w) of lines with unit normals: the point whose
+/// squared distances (pixels) from the lines sum least, or, for lines parallel in the image,
+/// the point at infinity along them (w = 0, pointing up the image).
 pub fn vanishing_point(lines: &[RowLine]) -> Vector3<f64> {
-    let mut m = Matrix3::zeros();
+    let (mut saa, mut sab, mut sbb, mut sac, mut sbc) = (0.0, 0.0, 0.0, 0.0, 0.0);
     for l in lines {
-        m += l.line * l.line.transpose();
+        let (a, b, c) = (l.line.x, l.line.y, l.line.z);
+        saa += a * a;
+        sab += a * b;
+        sbb += b * b;
+        sac += a * c;
+        sbc += b * c;
     }
-    let eig = SymmetricEigen::new(m);
-    let i = eig.eigenvalues.imin();
-    let v = eig.eigenvectors.column(i).into_owned();
-    if v.z < 0.0 {
-        -v
+    let det = saa * sbb - sab * sab;
+    let n = lines.len().max(1) as f64;
+    if det > 1e-10 * n * n {
+        let col = (-sac * sbb + sbc * sab) / det;
+        let row = (-sbc * saa + sac * sab) / det;
+        return Vector3::new(col, row, 1.0);
+    }
+    // Parallel: the lines' direction (perpendicular to their mean normal), up the image.
+    let eig = SymmetricEigen::new(Matrix2::new(saa, sab, sab, sbb));
+    let i = eig.eigenvalues.imax();
+    let nrm = eig.eigenvectors.column(i);
+    let (dc, dr) = (-nrm[1], nrm[0]);
+    if dr > 0.0 {
+        Vector3::new(-dc, -dr, 0.0)
     } else {
-        v
+        Vector3::new(dc, dr, 0.0)
     }
 }
 
@@ -277,8 +293,10 @@ impl Rectification {
         let lowest = lines.iter().map(|l| l.top[0]).fold(f64::INFINITY, f64::min);
         let vp_row = if v.z.abs() > 1e-12 {
             v.y / v.z
+        } else if v.y <= 0.0 {
+            f64::NEG_INFINITY
         } else {
-            f64::NEG_INFINITY * v.y.signum()
+            f64::INFINITY
         };
         if vp_row.is_nan() || vp_row >= lowest {
             return Err(Rejection::NotAhead {
@@ -463,8 +481,13 @@ mod tests {
     /// the rows, 0.1 m left of row 0; rows 0.5 m apart from −3 to 3, as (row, col) polylines
     /// from 1 m to 12 m ahead.
     fn view() -> Vec<Vec<[f64; 2]>> {
+        view_of(0.7, 0.14, 1.2, 0.1)
+    }
+
+    /// The rows seen by the level pinhole at `pitch` below the horizon and `yaw` to the rows
+    /// (radians), `h` metres high and `y_cam` metres left of row 0.
+    fn view_of(pitch: f64, yaw: f64, h: f64, y_cam: f64) -> Vec<Vec<[f64; 2]>> {
         let (f, c) = (300.0, 255.5);
-        let (pitch, yaw, h, y_cam): (f64, f64, f64, f64) = (0.7, 0.14, 1.2, 0.1);
         let project = |x: f64, y: f64| -> Option<[f64; 2]> {
             // World: x ahead, y left, z up; camera at (0, y_cam, h).
             let (dx, dy, dz) = (x, y - y_cam, -h);
@@ -487,6 +510,27 @@ mod tests {
                 (pts.len() > 20).then_some(pts)
             })
             .collect()
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(32))]
+        /// Any level view of three rows or more rectifies exactly: the camera's height and
+        /// its place across the rows (modulo the spacing) recovered, every row at k·spacing.
+        #[test]
+        fn any_level_view_is_recovered(
+            pitch in 0.35f64..1.2, yaw in -0.3f64..0.3, h in 0.5f64..2.5, y_cam in -1.0f64..1.0,
+        ) {
+            let rows = view_of(pitch, yaw, h, y_cam);
+            proptest::prop_assume!(rows.len() >= 3);
+            let r = Rectification::new(&rows, 512, 512, &opts()).unwrap();
+            proptest::prop_assert!((r.camera_height_m - h).abs() < 1e-6 * h);
+            let d = (r.camera_y_m - y_cam).rem_euclid(0.5);
+            proptest::prop_assert!(d.min(0.5 - d) < 1e-6, "{} vs {y_cam}", r.camera_y_m);
+            for (pts, &k) in rows.iter().zip(&r.row_index) {
+                let g = r.to_ground(pts[0][0], pts[0][1]).unwrap();
+                proptest::prop_assert!((g[1] - k as f64 * 0.5).abs() < 1e-6);
+            }
+        }
     }
 
     fn opts() -> RectifyOptions {
