@@ -9,7 +9,7 @@
 //! as through real optics. Rays above the horizon see sky; pixels outside the mask are
 //! black. Then the background noise (salt and pepper, then Gaussian smoothing), and for the
 //! Bayer style the RGGB mosaic. With a photograph's ground ([`Ground::Photo`]) every pixel
-//! takes its samples (2×2 where the footprint is within two texels, else n×n) from the
+//! takes its samples (2×2 where all of the pixel sees the ground, else n×n) from the
 //! texture at the footprint's scale instead. Rendering runs on up to `threads` threads over bands of rows
 //! and allocates nothing once its scratch buffers exist.
 
@@ -416,7 +416,8 @@ fn shade_row(
 }
 
 /// Shades image row `r` (band row `j`) with a photograph's ground: each pixel the mean of
-/// 2×2 samples where its footprint is within two texels, else of n×n; sky above the horizon.
+/// 2×2 samples of the texture at the footprint's scale where all of it sees the ground, else
+/// of n×n samples (ground or sky).
 #[allow(clippy::too_many_arguments)]
 fn shade_row_photo(
     geo: &Geometry,
@@ -454,7 +455,9 @@ fn shade_row_photo(
         } else {
             f64::INFINITY
         };
-        let n = if footprint <= 2.0 * photo.texel_m() {
+        // The texture's pyramid filters the ground at the footprint's scale: 2×2 samples
+        // suffice where all of the pixel sees the ground; the horizon's edge takes n×n.
+        let n = if all_ground {
             2
         } else {
             scene.options.samples as usize
