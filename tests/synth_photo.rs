@@ -174,8 +174,7 @@ fn generated_photographs_render_and_rejections_are_named() {
         serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     assert!((truth["heading_rad"].as_f64().unwrap() + 9f64.to_radians()).abs() < 1e-9);
     assert!(truth["row_normals"].as_array().unwrap().len() >= 4);
-    // The rejected photograph by index: its reason; a spacing the labels cannot meet with
-    // this focal length is fine (any spacing scales), but an index beyond the folder is not.
+    // The rejected photograph by index: its reason; an index beyond the folder: the count.
     let out = bin(&[&render[..], &ground, &focal, &["--photo-index", "2"]].concat());
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success());
