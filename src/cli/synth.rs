@@ -1,4 +1,7 @@
-//! `omnirow synth`: render a synthetic field image through a calibration, with its ground truth.
+//! `omnirow synth`: render a synthetic field image through a calibration, with its ground truth;
+//! its ground the synthetic plants or a labelled photograph's ([`photo`]).
+
+mod photo;
 
 use super::calib::LensArg;
 use crate::camera::{Calibration, IdealLens};
@@ -79,11 +82,13 @@ pub struct SynthArgs {
     #[arg(long, default_value_t = 1.0)]
     scale: f64,
     /// Output image (PNG; the Bayer style is written as a one-channel PNG of the mosaic).
-    #[arg(long)]
-    out: PathBuf,
+    #[arg(long, required_unless_present = "photo_survey")]
+    out: Option<PathBuf>,
     /// Ground truth output (JSON).
     #[arg(long)]
     truth: Option<PathBuf>,
+    #[command(flatten)]
+    photo: photo::PhotoArgs,
 }
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
@@ -102,14 +107,23 @@ pub enum ProtocolArg {
 }
 
 pub fn run(args: SynthArgs) -> anyhow::Result<ExitCode> {
-    if !args
-        .out
+    if args.photo.photo_survey {
+        let spacing = args
+            .row_spacing_m
+            .unwrap_or(SynthOptions::default().row_spacing_m);
+        photo::survey(&args.photo, spacing)?;
+        return Ok(ExitCode::SUCCESS);
+    }
+    let Some(out) = args.out.clone() else {
+        bail!("--out: give the image to write (a .png file)");
+    };
+    if !out
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("png"))
     {
         bail!(
             "--out {}: the image is written as PNG; give a .png file name",
-            args.out.display()
+            out.display()
         );
     }
     let (cal, lens_name) = match &args.calib {
@@ -170,7 +184,19 @@ pub fn run(args: SynthArgs) -> anyhow::Result<ExitCode> {
     }
 
     let t0 = Instant::now();
-    let scene = Scene::new(&opts, args.seed, &cal.mounting)?;
+    let mut scene = Scene::new(&opts, args.seed, &cal.mounting)?;
+    let mut ground_name = String::new();
+    if args.photo.images.is_some() {
+        let (ground, path) = photo::choose(&args.photo, opts.row_spacing_m, args.seed)?;
+        let r = ground.rectification();
+        ground_name = format!(
+            ", ground from {} ({} rows, camera {:.2} m high)",
+            path.display(),
+            r.row_index.len(),
+            r.camera_height_m
+        );
+        scene = scene.with_photo_ground(std::sync::Arc::new(ground))?;
+    }
     let mut renderer = Renderer::new(&cal)?;
     let t1 = Instant::now();
     let cpu0 = process_cpu_s();
@@ -184,14 +210,14 @@ pub fn run(args: SynthArgs) -> anyhow::Result<ExitCode> {
         Style::Colour | Style::Leafy => image::ExtendedColorType::Rgb8,
         Style::Grey | Style::Bayer => image::ExtendedColorType::L8,
     };
-    image::save_buffer_with_format(&args.out, &data, w, h, colour, image::ImageFormat::Png)
-        .with_context(|| format!("writing {}", args.out.display()))?;
+    image::save_buffer_with_format(&out, &data, w, h, colour, image::ImageFormat::Png)
+        .with_context(|| format!("writing {}", out.display()))?;
     if let Some(path) = &args.truth {
         let json = serde_json::to_string_pretty(&truth).context("serialising the ground truth")?;
         std::fs::write(path, json + "\n").with_context(|| format!("writing {}", path.display()))?;
     }
     eprintln!(
-        "synth: {lens_name} {w}x{h} {:?} seed {} yaw {:.2} pitch {:.2} roll {:.2} deg, heading {:.3} tilt {:.3} deg, {} rows listed; setup {:.0} ms, render {:.0} ms{} -> {}",
+        "synth: {lens_name} {w}x{h} {:?} seed {} yaw {:.2} pitch {:.2} roll {:.2} deg, heading {:.3} tilt {:.3} deg, {} rows listed{ground_name}; setup {:.0} ms, render {:.0} ms{} -> {}",
         opts.style,
         args.seed,
         opts.yaw_deg,
@@ -205,7 +231,7 @@ pub fn run(args: SynthArgs) -> anyhow::Result<ExitCode> {
         cpu_render
             .map(|c| format!(" ({:.0} ms CPU)", c * 1e3))
             .unwrap_or_default(),
-        args.out.display()
+        out.display()
     );
     Ok(ExitCode::SUCCESS)
 }

@@ -3,7 +3,9 @@
 //! Owns the paper's section III-B reproduced and extended: the field model (rows, plants with
 //! four leaves, weeds), the camera pose over it, the renderer (supersampled, greyscale or
 //! colour or Bayer), the three kinds of noise, and the ground truth of every image; and a
-//! second, independently designed appearance (`leafy`, in `appearance`) for the same scenes.
+//! second, independently designed appearance (`leafy`, in `appearance`) for the same scenes;
+//! and in place of the synthetic plants, a ground textured from a real labelled photograph
+//! ([`photo`], chosen by the scene's [`Ground`]).
 //!
 //! Typical use: [`render`] for one image, or a [`Renderer`] built once per calibration and a
 //! [`Scene`] per image for many. Everything follows from [`SynthOptions`] and a `u64` seed.
@@ -13,6 +15,7 @@ mod bayer;
 mod field;
 mod noise;
 mod options;
+pub mod photo;
 mod pose;
 mod protocol;
 mod render;
@@ -29,7 +32,7 @@ pub use pose::Pose;
 pub use protocol::{random_scene, Protocol};
 pub use render::Renderer;
 pub use rng::Rng;
-pub use scene::Scene;
+pub use scene::{Ground, Scene};
 pub use style::{Palette, Texture};
 // The truth of every image; frames carry it, so it is defined with them.
 pub use crate::frame::{GroundTruth, NoiseTruth};

@@ -8,13 +8,16 @@
 //! any other pixel takes n×n samples (`samples`), so that far rows merge into solid lines
 //! as through real optics. Rays above the horizon see sky; pixels outside the mask are
 //! black. Then the background noise (salt and pepper, then Gaussian smoothing), and for the
-//! Bayer style the RGGB mosaic. Rendering runs on up to `threads` threads over bands of rows
+//! Bayer style the RGGB mosaic. With a photograph's ground ([`Ground::Photo`]) every pixel
+//! takes its samples (2×2 where all of the pixel sees the ground, else n×n) from the
+//! texture at the footprint's scale instead. Rendering runs on up to `threads` threads over bands of rows
 //! and allocates nothing once its scratch buffers exist.
 
 use super::field::Cover;
 use super::noise::{self, run_each, Blur};
 use super::options::Style;
-use super::scene::Scene;
+use super::photo::PhotoGround;
+use super::scene::{Ground, Scene};
 use super::SynthError;
 use crate::camera::Calibration;
 use nalgebra::{Matrix3, Vector3};
@@ -176,6 +179,13 @@ impl Renderer {
         }
         let (w, h) = (self.geo.width, self.geo.height);
         if style == Style::Leafy {
+            if matches!(scene.ground, Ground::Photo(_)) {
+                return Err(SynthError::InvalidOption {
+                    name: "style",
+                    value: "leafy".into(),
+                    reason: "is not supported with a photograph's ground".into(),
+                });
+            }
             let g = &self.geo;
             return super::appearance::render_leafy(
                 scene,
@@ -240,7 +250,12 @@ fn shade(
         let rows = band.len() / row_bytes;
         corners_of_band(geo, scene, &rot, r0, rows, corners);
         for (j, row) in band.chunks_mut(row_bytes).enumerate() {
-            shade_row(geo, scene, corners, r0 + j, j, row, channels);
+            match &scene.ground {
+                Ground::Synthetic => shade_row(geo, scene, corners, r0 + j, j, row, channels),
+                Ground::Photo(photo) => {
+                    shade_row_photo(geo, scene, photo, corners, r0 + j, j, row, channels)
+                }
+            }
         }
     };
     run_each(scratch, &work);
@@ -397,6 +412,102 @@ fn shade_row(
                 px[k] = to_byte(acc[k]);
             }
         }
+    }
+}
+
+/// Shades image row `r` (band row `j`) with a photograph's ground: each pixel the mean of
+/// 2×2 samples of the texture at the footprint's scale where all of it sees the ground, else
+/// of n×n samples (ground or sky).
+#[allow(clippy::too_many_arguments)]
+fn shade_row_photo(
+    geo: &Geometry,
+    scene: &Scene,
+    photo: &PhotoGround,
+    corners: &[Corner],
+    r: usize,
+    j: usize,
+    out: &mut [u8],
+    channels: usize,
+) {
+    let (w, cw) = (geo.width, geo.width + 1);
+    let c0 = scene.pose.centre;
+    let (lo, hi) = geo.spans[r];
+    out[..lo * channels].fill(0);
+    out[hi * channels..].fill(0);
+    for col in lo..hi {
+        let px = &mut out[col * channels..(col + 1) * channels];
+        if !geo.inside[r * w + col] {
+            px.fill(0);
+            continue;
+        }
+        let k = [
+            &corners[j * cw + col],
+            &corners[j * cw + col + 1],
+            &corners[(j + 1) * cw + col],
+            &corners[(j + 1) * cw + col + 1],
+        ];
+        let all_ground = k.iter().all(|c| c.hits);
+        let footprint = if all_ground {
+            let (a, b, c, d) = (k[0].ground, k[1].ground, k[2].ground, k[3].ground);
+            let diag1 = (a[0] - d[0]).powi(2) + (a[1] - d[1]).powi(2);
+            let diag2 = (b[0] - c[0]).powi(2) + (b[1] - c[1]).powi(2);
+            diag1.max(diag2).sqrt()
+        } else {
+            f64::INFINITY
+        };
+        // The texture's pyramid filters the ground at the footprint's scale: 2×2 samples
+        // suffice where all of the pixel sees the ground; the horizon's edge takes n×n.
+        let n = if all_ground {
+            2
+        } else {
+            scene.options.samples as usize
+        };
+        let size = footprint / n as f64;
+        let mut acc = [0.0f32; 3];
+        let inv = 1.0 / (n * n) as f32;
+        for i in 0..n {
+            let u = (i as f64 + 0.5) / n as f64;
+            for jj in 0..n {
+                let v = (jj as f64 + 0.5) / n as f64;
+                let d = (k[0].dir * (1.0 - v) + k[1].dir * v) * (1.0 - u)
+                    + (k[2].dir * (1.0 - v) + k[3].dir * v) * u;
+                let c = photo_ray(scene, photo, &c0, &d, size);
+                for k in 0..3 {
+                    acc[k] += c[k] * inv;
+                }
+            }
+        }
+        for (o, a) in px.iter_mut().zip(acc) {
+            *o = to_byte(a);
+        }
+    }
+}
+
+/// Colour (grey in all channels for the grey style) of the world ray `d` from `centre` over
+/// a photograph's ground, the texture averaged over `size` metres.
+#[inline]
+fn photo_ray(
+    scene: &Scene,
+    photo: &PhotoGround,
+    centre: &Vector3<f64>,
+    d: &Vector3<f64>,
+    size: f64,
+) -> [f32; 3] {
+    let p = &scene.palette;
+    let grey = scene.options.style == Style::Grey;
+    if d.z >= 0.0 {
+        return if grey {
+            [p.grey_soil; 3]
+        } else {
+            p.sky_rgb((d.z / d.norm()) as f32)
+        };
+    }
+    let t = centre.z / -d.z;
+    let g = photo.colour(centre.x + t * d.x, centre.y + t * d.y, size);
+    if grey {
+        [0.299 * g[0] + 0.587 * g[1] + 0.114 * g[2]; 3]
+    } else {
+        g
     }
 }
 
