@@ -106,7 +106,9 @@ impl Detector {
     }
 
     /// Runs each frame's independent parts on `threads` threads (built once, here): the
-    /// combined method's Hough rows beside its edge detector. 1 (the default): every part on
+    /// preparation's row-by-row stages in bands and its threshold in halves, the combined
+    /// method's Hough rows beside its edge detector, the strips' search candidates shared
+    /// out. 1 (the default): every part on
     /// the calling thread. The answers are the same either way. A caller that runs frame
     /// after frame runs its loop on the threads themselves ([`Self::pool`]'s `install`):
     /// each frame then starts there without handing itself over, which allocates.
