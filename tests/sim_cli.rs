@@ -19,7 +19,15 @@ fn tmp_dir(name: &str) -> PathBuf {
 /// The ideal 185° fisheye at 306×256 as a calibration file.
 fn small_calib(dir: &std::path::Path) -> PathBuf {
     let out = bin()
-        .args(["calib", "ideal", "fisheye185", "--height", "256", "--width", "306"])
+        .args([
+            "calib",
+            "ideal",
+            "fisheye185",
+            "--height",
+            "256",
+            "--width",
+            "306",
+        ])
         .output()
         .unwrap();
     assert!(
@@ -110,7 +118,14 @@ fn stanley_on_an_ackermann_robot_follows_curved_rows_and_stops_at_their_end() {
         .args(["--image-height", "256", "--image-width", "306"])
         .args(["--controller", "stanley", "--robot", "ackermann"])
         .args(["--curvature-per-m", "0.05", "--rows-end-m", "6"])
-        .args(["--distance-m", "20", "--latency-ms", "70", "--settle-m", "3"])
+        .args([
+            "--distance-m",
+            "20",
+            "--latency-ms",
+            "70",
+            "--settle-m",
+            "3",
+        ])
         .arg("--json")
         .output()
         .unwrap();
@@ -130,7 +145,11 @@ fn the_human_table_without_json() {
         .output()
         .unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     assert!(stdout.contains("row changes"), "{stdout}");
     assert!(stdout.contains("cross-track"), "{stdout}");
     assert!(!stdout.trim_start().starts_with('{'), "{stdout}");

@@ -10,6 +10,7 @@ use crate::sim::{
     self, Controller, FrameRecord, Latency, RobotModel, SimOptions, Summary, SyntheticFieldOptions,
     SyntheticGround,
 };
+use crate::synth::Style;
 use anyhow::{bail, Context};
 use clap::{Args, ValueEnum};
 use std::io::{IsTerminal, Write};
@@ -80,6 +81,9 @@ pub struct SimArgs {
     /// Stanley's cross-track gain, 1/s.
     #[arg(long, value_name = "K", default_value_t = 1.0)]
     stanley_gain: f64,
+    /// The frames' look [default: bayer where both image sides are even, else grey].
+    #[arg(long, value_enum)]
+    style: Option<StyleArg>,
     /// Robot model.
     #[arg(long, value_enum, default_value_t = RobotArg::DiffDrive)]
     robot: RobotArg,
@@ -130,6 +134,16 @@ pub struct SimArgs {
 pub enum ControllerArg {
     PurePursuit,
     Stanley,
+}
+
+#[derive(Debug, Clone, Copy, ValueEnum)]
+pub enum StyleArg {
+    /// The GC2450C's raw RGGB mosaic of the colour field.
+    Bayer,
+    /// Green plants on textured soil, RGB.
+    Colour,
+    /// The paper's bright plants on a dark ground.
+    Grey,
 }
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
@@ -233,6 +247,11 @@ pub fn run(a: SimArgs) -> anyhow::Result<ExitCode> {
         rows_end_m: a.rows_end_m,
         length_m: a.distance_m,
         seed: a.seed,
+        style: a.style.map(|s| match s {
+            StyleArg::Bayer => Style::Bayer,
+            StyleArg::Colour => Style::Colour,
+            StyleArg::Grey => Style::Grey,
+        }),
     };
     if let Some(d) = &a.out {
         std::fs::create_dir_all(d).with_context(|| format!("creating {}", d.display()))?;
@@ -338,10 +357,11 @@ fn table(s: &Summary, o: &SimOptions, curvature: f64) -> String {
             format!(
                 "{:.1} m{}",
                 s.distance_m,
-                if s.reached_rows_end {
-                    " (stopped at the rows' end)"
-                } else {
-                    ""
+                match s.end {
+                    sim::End::Distance => "",
+                    sim::End::RowsEnd => " (stopped at the rows' end)",
+                    sim::End::LeftRows => " (ended: the robot left the rows)",
+                    sim::End::Timeout => " (ended: no headway in twice the time)",
                 }
             ),
         ),

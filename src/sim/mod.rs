@@ -144,6 +144,23 @@ pub struct FrameRecord {
     pub latency_s: f64,
 }
 
+/// Why a run ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum End {
+    /// The distance was driven.
+    Distance,
+    /// base_link reached the rows' end (the robot stops there).
+    RowsEnd,
+    /// The robot turned more than 60° from the rows: it has left them.
+    LeftRows,
+    /// Twice the time the distance takes, plus 10 s, went by (no headway: circling).
+    Timeout,
+}
+
+/// The robot has left the rows when it is turned this far from them, radians (60°).
+const LEFT_ROWS_RAD: f64 = std::f64::consts::FRAC_PI_3;
+
 /// What a run came to.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Summary {
@@ -165,6 +182,8 @@ pub struct Summary {
     pub row_changes: usize,
     /// The run stopped at the rows' end.
     pub reached_rows_end: bool,
+    /// Why the run ended.
+    pub end: End,
     /// Mean and largest latency applied, milliseconds.
     pub latency_mean_ms: f64,
     pub latency_max_ms: f64,
@@ -264,6 +283,7 @@ pub fn run_steered(
         cross_track_max_all_m: 0.0,
         row_changes: 0,
         reached_rows_end: false,
+        end: End::Distance,
         latency_mean_ms: 0.0,
         latency_max_ms: 0.0,
         wall_s: 0.0,
@@ -271,6 +291,8 @@ pub fn run_steered(
     let (mut xt, mut he) = (Vec::new(), Vec::new());
     let mut latency_sum = 0.0;
     let end = ground.rows_end_m();
+    // a robot that no longer makes headway (circling on a held command) ends the run
+    let max_t = 2.0 * o.distance_m / o.speed_mps + 10.0;
     for seq in 0u64.. {
         let t = seq as f64 * dt;
         let base = rf.to_rows(&pose);
@@ -288,8 +310,17 @@ pub fn run_steered(
         if let Some(e) = end {
             if base.along_m >= e {
                 s.reached_rows_end = true;
+                s.end = End::RowsEnd;
                 break;
             }
+        }
+        if base.yaw_rad.abs() > LEFT_ROWS_RAD {
+            s.end = End::LeftRows;
+            break;
+        }
+        if t > max_t {
+            s.end = End::Timeout;
+            break;
         }
         s.distance_m = travelled;
         let p0 = *path0.get_or_insert_with(|| path_of(tool.lateral_m));

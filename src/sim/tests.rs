@@ -32,6 +32,7 @@ fn sim(controller: Controller, curvature_per_m: f64, flip: bool) -> (Summary, Ve
             rows_end_m: None,
             length_m: o.distance_m,
             seed: 3,
+            style: None,
         },
     )
     .unwrap();
@@ -66,12 +67,13 @@ fn the_loop_keeps_the_robot_in_its_path_on_straight_and_curved_rows() {
         let (s, frames) = sim(ctl, c, false);
         assert_eq!(s.row_changes, 0, "{ctl:?} {c}: {s:?}");
         assert_eq!(s.frames_without_guidance, 0, "{ctl:?} {c}: {s:?}");
+        assert_eq!(s.end, End::Distance, "{s:?}");
         assert!(s.cross_track_max_m < 0.05, "{ctl:?} {c}: {s:?}");
         assert!(s.distance_m > 5.8, "{s:?}");
-        // the published offset follows the truth
-        for f in &frames {
+        // past the approach, the published offset follows the truth
+        for f in frames.iter().filter(|f| f.rows.along_m > 2.0) {
             let e = f.estimate.offset_m.unwrap();
-            assert!((e - f.cross_track_m).abs() < 0.03, "{ctl:?} {c}: {f:?}");
+            assert!((e - f.cross_track_m).abs() < 0.02, "{ctl:?} {c}: {f:?}");
         }
     }
 }
