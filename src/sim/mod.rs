@@ -399,28 +399,14 @@ pub fn run_steered(
             xt.push(cross);
             he.push(tool.yaw_rad.to_degrees().abs());
         }
-        // drive to the next frame, each command acting from its time
-        let (mut now, next) = (t, t + dt);
-        pending.sort_by(|a, b| a.0.total_cmp(&b.0));
-        while let Some(&(at, k)) = pending.first() {
-            if at > next {
-                break;
-            }
-            if at > now {
-                pose.integrate(
-                    o.speed_mps,
-                    o.robot.yaw_rate(o.speed_mps, command),
-                    at - now,
-                );
-                now = at;
-            }
-            command = k;
-            pending.remove(0);
-        }
-        pose.integrate(
+        command = drive(
+            &mut pose,
+            command,
+            &mut pending,
+            t,
+            t + dt,
+            &o.robot,
             o.speed_mps,
-            o.robot.yaw_rate(o.speed_mps, command),
-            next - now,
         );
     }
     s.settled_frames = xt.len();
@@ -438,6 +424,35 @@ pub fn run_steered(
     }
     s.wall_s = started.elapsed().as_secs_f64();
     Ok(s)
+}
+
+/// Drives `pose` from time `from` to `to` at speed `v`, the curvature `command` acting until
+/// each pending command's time (`pending`: (time it acts, curvature), those due by `to`
+/// taken out); the command acting at `to`.
+fn drive(
+    pose: &mut Pose2,
+    mut command: f64,
+    pending: &mut Vec<(f64, f64)>,
+    from: f64,
+    to: f64,
+    robot: &RobotModel,
+    v: f64,
+) -> f64 {
+    let mut now = from;
+    pending.sort_by(|a, b| a.0.total_cmp(&b.0));
+    while let Some(&(at, k)) = pending.first() {
+        if at > to {
+            break;
+        }
+        if at > now {
+            pose.integrate(v, robot.yaw_rate(v, command), at - now);
+            now = at;
+        }
+        command = k;
+        pending.remove(0);
+    }
+    pose.integrate(v, robot.yaw_rate(v, command), to - now);
+    command
 }
 
 #[cfg(test)]

@@ -84,3 +84,35 @@ fn with_the_steering_sign_flipped_the_robot_leaves_its_path() {
     let (s, _) = sim(ctl, 0.0, true);
     assert!(s.row_changes > 0 || s.cross_track_max_all_m > 0.25, "{s:?}");
 }
+
+#[test]
+fn a_command_acts_from_its_time_and_a_long_latency_waits_for_later_frames() {
+    let robot = RobotModel::DiffDrive {
+        max_yaw_rate_rad_s: 10.0,
+    };
+    let start = Pose2 {
+        x: 0.0,
+        y: 0.0,
+        theta: 0.0,
+    };
+    // frame 0 at t = 0, its command (curvature 0.2) acting after 30 ms, frames 100 ms apart
+    let mut pose = start;
+    let mut pending = vec![(0.03, 0.2)];
+    let now = drive(&mut pose, 0.0, &mut pending, 0.0, 0.1, &robot, 1.0);
+    assert_eq!(now, 0.2);
+    assert!(pending.is_empty());
+    let mut want = start;
+    want.integrate(1.0, 0.0, 0.03);
+    want.integrate(1.0, 0.2, 0.07);
+    assert!((pose.x - want.x).abs() < 1e-12 && (pose.y - want.y).abs() < 1e-12);
+    assert!((pose.theta - 0.2 * 0.07).abs() < 1e-12);
+    // a latency of 150 ms: the command waits into the next frame's interval
+    let mut pose = start;
+    let mut pending = vec![(0.15, -0.5)];
+    let now = drive(&mut pose, 0.1, &mut pending, 0.0, 0.1, &robot, 1.0);
+    assert_eq!(now, 0.1);
+    assert_eq!(pending, vec![(0.15, -0.5)]);
+    let now = drive(&mut pose, now, &mut pending, 0.1, 0.2, &robot, 1.0);
+    assert_eq!(now, -0.5);
+    assert!((pose.theta - (0.1 * 0.15 - 0.5 * 0.05)).abs() < 1e-12);
+}
