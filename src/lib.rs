@@ -24,6 +24,7 @@ pub mod pipeline;
 pub mod publish;
 pub mod record;
 pub mod ros2;
+pub mod sim;
 pub mod source;
 pub mod sphere;
 pub mod status;

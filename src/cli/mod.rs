@@ -11,6 +11,7 @@ mod eval;
 mod eval_real;
 mod recording;
 mod run;
+mod sim;
 mod synth;
 
 use clap::{Parser, Subcommand};
@@ -50,6 +51,9 @@ pub enum Command {
     },
     /// List the GigE Vision / USB3 Vision cameras Aravis finds (needs the `camera` feature).
     Cameras(cameras::CamerasArgs),
+    /// The closed steering loop on a synthetic field: a robot steered by the node's own
+    /// row guidance, scored against its true pose (docs/sim.md).
+    Sim(Box<sim::SimArgs>),
     /// Check MCAP recordings for damage, or repair one (docs/recording.md).
     #[command(subcommand)]
     Recording(recording::RecordingCommand),
@@ -72,6 +76,7 @@ pub fn main() -> anyhow::Result<ExitCode> {
         Command::Record { out, args } => run::run(*args, Some(out)),
         Command::Cameras(a) => cameras::run(a),
         Command::Recording(c) => recording::run(c),
+        Command::Sim(a) => sim::run(*a),
     }
 }
 
