@@ -43,6 +43,15 @@ fn bench(c: &mut Criterion) {
             g.bench_function(format!("detector_{}", method.name()), |b| {
                 b.iter(|| det.process(black_box(&view), &mut out).unwrap())
             });
+            if method == Method::Combined {
+                // The same on two threads: the wall-time target is ≤ 0.6× the one above.
+                let mut two = Detector::new(&cal, det.options().clone()).unwrap();
+                two.set_threads(2).unwrap();
+                two.process(&view, &mut out).unwrap();
+                g.bench_function("detector_combined_2_threads", |b| {
+                    b.iter(|| two.process(black_box(&view), &mut out).unwrap())
+                });
+            }
             let cpu = cpu_per_frame(&mut || {
                 det.process(&view, &mut out).unwrap();
             });
