@@ -125,6 +125,19 @@ struct RawConfig {
 }
 
 impl Config {
+    /// The per-frame step as this configuration sets it: `[detector]`, `[guidance]` and
+    /// `[pipeline]`'s `narrow_search`, `min_quality` and `threads` (what `omnirow run`'s
+    /// pipeline runs; `omnirow sim` and `omnirow eval guidance` take it).
+    pub fn perception(&self) -> crate::perception::PerceptionOptions {
+        crate::perception::PerceptionOptions {
+            detector: self.detector.clone(),
+            guidance: self.guidance,
+            narrow_search: self.pipeline.narrow_search.is_some(),
+            min_quality: self.pipeline.min_quality,
+            threads: self.threads,
+        }
+    }
+
     /// Reads and validates a configuration file.
     pub fn load(path: &Path) -> Result<Config, ConfigError> {
         let text = std::fs::read_to_string(path).map_err(|e| ConfigError {

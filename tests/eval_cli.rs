@@ -297,3 +297,69 @@ fn eval_leafy_reports_table1_on_the_second_appearance() {
         "{md}"
     );
 }
+
+/// ../shared/real-fields/crdld beside the repository, when present.
+fn crdld() -> Option<std::path::PathBuf> {
+    let root = Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../shared/real-fields/crdld"
+    ))
+    .to_path_buf();
+    if root.join("image").is_dir() && root.join("label").is_dir() {
+        Some(root)
+    } else {
+        eprintln!("skipping: {} is absent", root.display());
+        None
+    }
+}
+
+/// `eval guidance` over two photographs' grounds through a calibration: a row per
+/// photograph and one pooling both, an offset on every frame; a drive a photograph cannot
+/// show (curved rows) is refused naming why.
+#[test]
+fn eval_guidance_runs_over_photographs_through_a_calibration() {
+    let Some(root) = crdld() else { return };
+    let calib = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/config/calib/fisheye185_gc2450c.toml"
+    );
+    let (images, labels) = (root.join("image"), root.join("label"));
+    let out = std::env::temp_dir().join(format!("omnirow-eval-photo-{}", std::process::id()));
+    let common = [
+        "eval",
+        "guidance",
+        "--calib",
+        calib,
+        "--scale",
+        "0.5",
+        "--images",
+        images.to_str().unwrap(),
+        "--labels",
+        labels.to_str().unwrap(),
+        "--seconds",
+        "0.4",
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    let md = omnirow_ok(&[&common[..], &["--photos", "2", "--drives", "weaving"]].concat());
+    let rows: Vec<&str> = md.lines().filter(|l| l.starts_with("| weaving")).collect();
+    assert_eq!(rows.len(), 3, "{md}");
+    assert!(rows[0].starts_with("| weaving@"), "{md}");
+    assert!(
+        rows[2].starts_with("| weaving (2 photographs) | 12 |"),
+        "{md}"
+    );
+    let run = omnirow(&[&common[..], &["--drives", "curved_r20"]].concat());
+    assert!(!run.status.success());
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(err.contains("curvature_per_m"), "{err}");
+    // --photos needs photographs; --scale a calibration
+    for args in [
+        &["eval", "guidance", "--photos", "2"][..],
+        &["eval", "guidance", "--scale", "0.5"],
+    ] {
+        let run = omnirow(args);
+        assert!(!run.status.success(), "{args:?}");
+    }
+    std::fs::remove_dir_all(&out).ok();
+}

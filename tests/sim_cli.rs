@@ -212,3 +212,49 @@ fn bad_input_is_a_clear_error() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("no_such_key"), "{err}");
 }
+
+/// The loop over a ground textured from a real photograph (../shared's CRDLD, skipped when
+/// absent), with the field's row spacing configured: the robot keeps its path.
+#[test]
+fn the_loop_runs_over_a_photographs_ground() {
+    let root = std::path::Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../shared/real-fields/crdld"
+    ));
+    if !root.join("image").is_dir() || !root.join("label").is_dir() {
+        eprintln!("skipping: {} is absent", root.display());
+        return;
+    }
+    let dir = tmp_dir("photo");
+    let cfg = dir.join("spacing.toml");
+    std::fs::write(&cfg, "[guidance]\nrow_spacing_m = 0.5\n").unwrap();
+    let out = bin()
+        .arg("sim")
+        .args([
+            "--lens",
+            "fisheye185",
+            "--image-height",
+            "512",
+            "--image-width",
+            "612",
+        ])
+        .arg("--config")
+        .arg(&cfg)
+        .arg("--images")
+        .arg(root.join("image"))
+        .arg("--labels")
+        .arg(root.join("label"))
+        .args(["--speed-mps", "1.5", "--distance-m", "8", "--settle-m", "4"])
+        .args(["--start-offset-m", "0.05", "--latency-ms", "70", "--json"])
+        .output()
+        .unwrap();
+    let s = summary(&out);
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("the ground from"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(s["row_changes"], 0, "{s}");
+    assert!(s["cross_track_max_m"].as_f64().unwrap() < 0.1, "{s}");
+    assert!(s["frames_without_guidance"].as_u64().unwrap() < 5, "{s}");
+}

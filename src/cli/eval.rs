@@ -92,6 +92,31 @@ pub struct GuidanceArgs {
     #[arg(long, value_name = "N", default_value_t = crate::pipeline::DEFAULT_THREADS as u16,
           value_parser = clap::value_parser!(u16).range(1..=16))]
     pub threads: u16,
+    /// Render the drives through this calibration (OCamCalib or omnirow TOML) instead of the
+    /// ideal fisheye of --width x --height.
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["width", "height"])]
+    pub calib: Option<PathBuf>,
+    /// With --calib: its resolution times K (0.5: half).
+    #[arg(long, value_name = "K", requires = "calib")]
+    pub scale: Option<f64>,
+    /// The drives' weaving: largest lateral offset from the path's centre line, metres.
+    #[arg(long, value_name = "M")]
+    pub offset_amplitude_m: Option<f64>,
+    /// The drives' weaving: largest heading, degrees.
+    #[arg(long, value_name = "DEG")]
+    pub heading_amplitude_deg: Option<f64>,
+    /// With --images: run each drive over this many photographs' grounds (those that fit,
+    /// from --photo-index or the first on) and add a row pooling them.
+    #[arg(long, value_name = "N", default_value_t = 1, requires = "images",
+          value_parser = clap::value_parser!(u16).range(1..=500))]
+    pub photos: u16,
+    /// The node's configuration: its `[detector]`, `[guidance]` and `[pipeline]`
+    /// (narrow_search, min_quality) as `omnirow run` reads them [default: the defaults,
+    /// the search narrowed unless --no-narrow].
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    #[command(flatten)]
+    pub photo: super::synth::photo::PhotoArgs,
 }
 
 /// `omnirow eval guidance`.
@@ -101,8 +126,40 @@ fn guidance(a: GuidanceArgs) -> anyhow::Result<ExitCode> {
         "--seconds {} must be in (0, 3600]",
         a.seconds
     );
-    let detector = crate::detect::DetectorOptions::default();
-    let all = eval::guidance::scenarios(a.width, a.height, a.seconds);
+    let mut step = match &a.config {
+        Some(p) => {
+            let cfg = crate::config::Config::load(p)?;
+            anyhow::ensure!(
+                cfg.guidance.is_some(),
+                "{}: [guidance] enabled = false: the drives score row guidance",
+                p.display()
+            );
+            cfg.perception()
+        }
+        None => crate::perception::PerceptionOptions {
+            narrow_search: true,
+            ..Default::default()
+        },
+    };
+    if a.no_narrow {
+        step.narrow_search = false;
+    }
+    step.threads = a.threads.into();
+    let mut all = eval::guidance::scenarios(a.width, a.height, a.seconds);
+    for s in &mut all {
+        if let Some(m) = a.offset_amplitude_m {
+            anyhow::ensure!((0.0..=5.0).contains(&m), "--offset-amplitude-m {m}: 0..=5");
+            s.drive.offset_amplitude_m = m;
+        }
+        if let Some(d) = a.heading_amplitude_deg {
+            anyhow::ensure!(
+                (0.0..=45.0).contains(&d),
+                "--heading-amplitude-deg {d}: 0..=45"
+            );
+            s.drive.heading_amplitude_deg = d;
+        }
+    }
+    let settings = guidance_settings(&a)?;
     if let Some(bad) = a
         .drives
         .iter()
@@ -118,13 +175,15 @@ fn guidance(a: GuidanceArgs) -> anyhow::Result<ExitCode> {
         .into_iter()
         .filter(|s| a.drives.iter().any(|d| d == s.name))
     {
-        eprintln!("eval guidance: {} ({} frames)", s.name, s.frames);
-        scores.push(eval::guidance::run_drive(
-            &s,
-            &detector,
-            !a.no_narrow,
-            a.threads.into(),
-        )?);
+        for setting in &settings {
+            let name = setting.photo.as_ref().map(|p| p.1.as_str()).unwrap_or("");
+            eprintln!("eval guidance: {} {name} ({} frames)", s.name, s.frames);
+            scores.push(eval::guidance::run_drive(&s, setting, &step)?);
+        }
+        if settings.len() > 1 {
+            let name = format!("{} ({} photographs)", s.name, settings.len());
+            scores.extend(eval::guidance::pooled(&scores, s.name, &name));
+        }
     }
     let command: Vec<String> = std::env::args().collect();
     let command = format!("omnirow {}", command[1..].join(" "));
@@ -134,6 +193,55 @@ fn guidance(a: GuidanceArgs) -> anyhow::Result<ExitCode> {
         eprintln!("eval: wrote {}", f.display());
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// The settings the drives run in: `--calib` (at `--scale`) or the ideal fisheye, over the
+/// synthetic ground or each of `--photos` photographs' grounds.
+fn guidance_settings(a: &GuidanceArgs) -> anyhow::Result<Vec<eval::guidance::Setting>> {
+    let calibration = match &a.calib {
+        Some(p) => {
+            let cal = Calibration::load(p)?;
+            Some(match a.scale {
+                None => cal,
+                Some(k) if k.is_finite() && k > 0.0 => cal
+                    .rescaled(1.0 / k)
+                    .map_err(|e| anyhow::anyhow!("--scale {k}: {e}"))?,
+                Some(k) => anyhow::bail!("--scale {k}: must be a positive factor (0.5: half)"),
+            })
+        }
+        None => None,
+    };
+    if a.photo.images.is_none() {
+        return Ok(vec![eval::guidance::Setting {
+            calibration,
+            photo: None,
+        }]);
+    }
+    anyhow::ensure!(
+        !a.photo.photo_survey,
+        "--photo-survey belongs to omnirow synth (it renders nothing)"
+    );
+    let spacing = crate::synth::SynthOptions::default().row_spacing_m;
+    let photos = super::synth::photo::choose_many(&a.photo, spacing, 0, a.photos.into())?;
+    if photos.len() < a.photos.into() {
+        eprintln!(
+            "eval guidance: {} of the {} photographs asked for fit",
+            photos.len(),
+            a.photos
+        );
+    }
+    Ok(photos
+        .into_iter()
+        .map(|(g, path)| eval::guidance::Setting {
+            calibration: calibration.clone(),
+            photo: Some((
+                std::sync::Arc::new(g),
+                path.file_name()
+                    .map(|n| n.to_string_lossy().into_owned())
+                    .unwrap_or_else(|| path.display().to_string()),
+            )),
+        })
+        .collect())
 }
 
 pub fn run(a: EvalArgs) -> anyhow::Result<ExitCode> {

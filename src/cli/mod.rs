@@ -12,7 +12,7 @@ mod eval_real;
 mod recording;
 mod run;
 mod sim;
-mod synth;
+pub(crate) mod synth;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;

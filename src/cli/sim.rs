@@ -7,8 +7,8 @@ use crate::camera::{Calibration, IdealLens};
 use crate::eval::chart::{Chart, Kind, Series};
 use crate::perception::{Perception, PerceptionOptions};
 use crate::sim::{
-    self, Controller, FrameRecord, Latency, RobotModel, SimOptions, Summary, SyntheticFieldOptions,
-    SyntheticGround,
+    self, Controller, FrameRecord, Ground, Latency, RobotModel, SimOptions, Summary,
+    SyntheticFieldOptions, SyntheticGround,
 };
 use crate::synth::Style;
 use anyhow::{bail, Context};
@@ -128,6 +128,8 @@ pub struct SimArgs {
     /// Print the summary as one JSON line, the last on stdout.
     #[arg(long)]
     json: bool,
+    #[command(flatten)]
+    photo: super::synth::photo::PhotoArgs,
 }
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
@@ -178,6 +180,22 @@ fn calibration(a: &SimArgs) -> anyhow::Result<Calibration> {
         .map_err(|e| anyhow::anyhow!("--scale {}: {e}", a.scale))
 }
 
+/// The field's ground textured from the photograph `--images`/`--labels` choose.
+fn photo_ground(
+    ground: SyntheticGround,
+    args: &super::synth::photo::PhotoArgs,
+    seed: u64,
+) -> anyhow::Result<SyntheticGround> {
+    if args.photo_survey {
+        bail!("--photo-survey belongs to omnirow synth (it renders nothing)");
+    }
+    let (photo, path) = super::synth::photo::choose(args, ground.row_spacing_m(), seed)?;
+    eprintln!("sim: the ground from {}", path.display());
+    ground
+        .with_photo_ground(std::sync::Arc::new(photo))
+        .with_context(|| format!("the ground of {}", path.display()))
+}
+
 pub fn run(a: SimArgs) -> anyhow::Result<ExitCode> {
     let cal = calibration(&a)?;
     let (mut perception_opts, tool_point) = match &a.config {
@@ -189,13 +207,7 @@ pub fn run(a: SimArgs) -> anyhow::Result<ExitCode> {
                     p.display()
                 );
             };
-            let opts = PerceptionOptions {
-                detector: cfg.detector,
-                guidance: Some(g),
-                narrow_search: cfg.pipeline.narrow_search.is_some(),
-                min_quality: cfg.pipeline.min_quality,
-                threads: cfg.threads,
-            };
+            let opts = cfg.perception();
             (opts, g.tool_point_m)
         }
         None => {
@@ -257,6 +269,9 @@ pub fn run(a: SimArgs) -> anyhow::Result<ExitCode> {
         std::fs::create_dir_all(d).with_context(|| format!("creating {}", d.display()))?;
     }
     let mut ground = SyntheticGround::new(&cal, &field).context("the synthetic field")?;
+    if a.photo.images.is_some() {
+        ground = photo_ground(ground, &a.photo, a.seed)?;
+    }
     let mut perception = Perception::new(&cal, &perception_opts)?;
     let mut jsonl = match &a.out {
         Some(d) => {

@@ -1,7 +1,7 @@
 //! `omnirow synth`: render a synthetic field image through a calibration, with its ground truth;
 //! its ground the synthetic plants or a labelled photograph's ([`photo`]).
 
-mod photo;
+pub(super) mod photo;
 
 use super::calib::LensArg;
 use crate::camera::{Calibration, IdealLens};

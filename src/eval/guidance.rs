@@ -7,11 +7,13 @@
 //! and one PNG per drive of the offset, truth and estimate over time (drawn with [`super::chart`]).
 
 use super::chart::{Chart, ChartError, Kind, Series};
-use crate::detect::DetectorOptions;
+use crate::camera::Calibration;
 use crate::guidance::CropState;
 use crate::perception::{Perception, PerceptionOptions};
 use crate::source::synthetic::{SyntheticDrive, SyntheticDriveOptions};
+use crate::synth::photo::PhotoGround;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 /// Errors of the guidance evaluation.
 #[derive(Debug, thiserror::Error)]
@@ -109,6 +111,38 @@ pub fn scenarios(width: u32, height: u32, seconds: f64) -> Vec<Scenario> {
     ]
 }
 
+/// What a drive is seen through and drives over: the scenario's ideal lens or a
+/// calibration, the synthetic ground or a photograph's (straight drives only).
+#[derive(Clone, Default)]
+pub struct Setting {
+    pub calibration: Option<Calibration>,
+    /// The photograph's ground and the photograph's name (the score's name is
+    /// `drive@name`).
+    pub photo: Option<(Arc<PhotoGround>, String)>,
+}
+
+impl Setting {
+    /// The drive of `s` in this setting.
+    fn drive(&self, s: &Scenario) -> Result<SyntheticDrive, crate::synth::SynthError> {
+        let mut drive = match &self.calibration {
+            Some(cal) => SyntheticDrive::through(s.drive.clone(), cal.clone())?,
+            None => SyntheticDrive::new(s.drive.clone())?,
+        };
+        if let Some((g, _)) = &self.photo {
+            drive = drive.with_photo_ground(g.clone())?;
+        }
+        Ok(drive)
+    }
+
+    /// The score's name for drive `name`.
+    fn name(&self, name: &str) -> String {
+        match &self.photo {
+            Some((_, p)) => format!("{name}@{p}"),
+            None => name.to_string(),
+        }
+    }
+}
+
 /// The drives run unless others are named: all but `field` (which repeats them in one).
 pub const DEFAULT_DRIVES: [&str; 4] = ["weaving", "crossing", "curved_r20", "headland"];
 
@@ -160,32 +194,26 @@ fn quantile(v: &mut [f64], p: f64) -> f64 {
     v[((v.len() - 1) as f64 * p).round() as usize]
 }
 
-/// Runs one drive through the perception step (the detector with `detector` options, the
-/// row fit and guidance); with `narrow`, each frame's search is narrowed by the tracker's
-/// prediction as the node's pipeline does ([`crate::perception::NarrowSearch`]); each
-/// frame's independent parts on `threads` threads.
+/// Runs one drive in `setting` through the perception step as `opts` configure it (the
+/// detector, the row fit and guidance; with `narrow_search`, each frame's search narrowed
+/// by the tracker's prediction as the node's pipeline does,
+/// [`crate::perception::NarrowSearch`]).
 pub fn run_drive(
     s: &Scenario,
-    detector: &DetectorOptions,
-    narrow: bool,
-    threads: usize,
+    setting: &Setting,
+    opts: &PerceptionOptions,
 ) -> Result<DriveScore, GuidanceEvalError> {
+    let name = setting.name(s.name);
     let fail = |problem: String| GuidanceEvalError::Drive {
-        drive: s.name.to_string(),
+        drive: name.clone(),
         problem,
     };
-    let mut drive = SyntheticDrive::new(s.drive.clone()).map_err(|e| fail(e.to_string()))?;
+    let mut drive = setting.drive(s).map_err(|e| fail(e.to_string()))?;
     let cal = drive.calibration().clone();
-    let opts = PerceptionOptions {
-        detector: detector.clone(),
-        narrow_search: narrow,
-        threads,
-        ..PerceptionOptions::default()
-    };
-    let mut perception = Perception::new(&cal, &opts).map_err(|e| fail(e.to_string()))?;
+    let mut perception = Perception::new(&cal, opts).map_err(|e| fail(e.to_string()))?;
     let (mut offs, mut heads, mut curv) = (Vec::new(), Vec::new(), Vec::new());
     let mut score = DriveScore {
-        name: s.name.to_string(),
+        name: name.clone(),
         frames: s.frames as usize,
         estimated: 0,
         offset_mean_abs_m: 0.0,
@@ -297,6 +325,44 @@ pub fn run_drive(
     Ok(score)
 }
 
+/// The drives of `scores` named `drive` (in any setting, `drive@…`) pooled into one score
+/// named `name`: every frame's offset and heading error together, the counts summed.
+/// `None` when there is no such drive.
+pub fn pooled(scores: &[DriveScore], drive: &str, name: &str) -> Option<DriveScore> {
+    let of: Vec<&DriveScore> = scores
+        .iter()
+        .filter(|d| d.name == drive || d.name.starts_with(&format!("{drive}@")))
+        .collect();
+    if of.is_empty() {
+        return None;
+    }
+    let (mut offs, mut heads) = (Vec::new(), Vec::new());
+    for f in of.iter().flat_map(|d| &d.series) {
+        if let Some(o) = f.offset_m {
+            offs.push((o - f.truth_offset_m).abs());
+        }
+        if let Some(h) = f.heading_rad {
+            heads.push((h - f.truth_heading_rad).abs().to_degrees());
+        }
+    }
+    let sum = |f: fn(&DriveScore) -> usize| of.iter().map(|d| f(d)).sum::<usize>();
+    Some(DriveScore {
+        name: name.to_string(),
+        frames: sum(|d| d.frames),
+        estimated: sum(|d| d.estimated),
+        offset_mean_abs_m: offs.iter().sum::<f64>() / offs.len().max(1) as f64,
+        offset_p99_m: quantile(&mut offs, 0.99),
+        heading_p99_deg: quantile(&mut heads, 0.99),
+        curvature_max_rel: None,
+        row_jumps: sum(|d| d.row_jumps),
+        end_max_err_m: None,
+        end_missed: sum(|d| d.end_missed),
+        empty_frames: sum(|d| d.empty_frames),
+        empty_reported: sum(|d| d.empty_reported),
+        series: Vec::new(),
+    })
+}
+
 /// The scores as a Markdown table.
 pub fn markdown(scores: &[DriveScore], command: &str) -> String {
     let mut s = format!(
@@ -310,14 +376,22 @@ pub fn markdown(scores: &[DriveScore], command: &str) -> String {
             (None, 0) => "—".to_string(),
             (e, m) => format!("{} / {m}", e.map_or("—".into(), |e| format!("{e:.2}"))),
         };
+        // no estimate: no error to give
+        let mm = |v: f64| match d.estimated {
+            0 => "—".to_string(),
+            _ => format!("{:.1}", v * 1e3),
+        };
+        let heading = match d.estimated {
+            0 => "—".to_string(),
+            _ => format!("{:.3}", d.heading_p99_deg),
+        };
         s += &format!(
-            "| {} | {} | {} | {:.1} | {:.1} | {:.3} | {curv} | {} | {end} | {}/{} |\n",
+            "| {} | {} | {} | {} | {} | {heading} | {curv} | {} | {end} | {}/{} |\n",
             d.name,
             d.frames,
             d.estimated,
-            d.offset_mean_abs_m * 1e3,
-            d.offset_p99_m * 1e3,
-            d.heading_p99_deg,
+            mm(d.offset_mean_abs_m),
+            mm(d.offset_p99_m),
             d.row_jumps,
             d.empty_reported,
             d.empty_frames
@@ -354,7 +428,7 @@ pub fn write(
     }
     std::fs::write(&jsonl, lines).map_err(io(&jsonl))?;
     files.push(jsonl);
-    for d in scores {
+    for d in scores.iter().filter(|d| !d.series.is_empty()) {
         let chart = Chart {
             title: format!("guidance: {} — offset from the followed line", d.name),
             x_label: "time (s)".into(),
@@ -385,7 +459,7 @@ pub fn write(
                 },
             ],
         };
-        let png = dir.join(format!("guidance_{}.png", d.name));
+        let png = dir.join(format!("guidance_{}.png", d.name.replace(['/', '\\'], "_")));
         chart
             .render()?
             .save(&png)
@@ -406,7 +480,12 @@ mod tests {
     fn a_short_weaving_drive_scores_within_the_targets_and_writes_its_files() {
         let mut s = scenarios(306, 256, 1.0).remove(0);
         s.frames = 8;
-        let d = run_drive(&s, &DetectorOptions::default(), true, 2).unwrap();
+        let opts = PerceptionOptions {
+            narrow_search: true,
+            threads: 2,
+            ..PerceptionOptions::default()
+        };
+        let d = run_drive(&s, &Setting::default(), &opts).unwrap();
         assert_eq!(d.frames, 8);
         assert_eq!(d.estimated, 8);
         assert_eq!(d.row_jumps, 0);

@@ -1,8 +1,8 @@
 //! What the camera sees: a [`Ground`] renders the view from a camera pose given relative to
 //! the rows, and says where the rows are. [`SyntheticGround`] is the synthetic field of
 //! [`crate::synth`] (the synthetic drive's look: Bayer frames, RGB where the image has an odd
-//! side, a plant every 5 cm); another
-//! ground (e.g. photographs textured onto the field) implements the same trait.
+//! side, a plant every 5 cm), or with [`SyntheticGround::with_photo_ground`] its ground
+//! textured from a photograph of real rows (straight rows, no gap, no end).
 //!
 //! Owns [`RowFrame`], the conversion between world poses and row-relative ones: the rows
 //! are straight along world +X through y = i·spacing, or for curvature c concentric circles
@@ -16,7 +16,9 @@ use super::robot::Pose2;
 use super::SimError;
 use crate::camera::Calibration;
 use crate::frame::PixelFormat;
+use crate::synth::photo::PhotoGround;
 use crate::synth::{Renderer, Scene, Style, SynthOptions};
+use std::sync::Arc;
 
 /// A pose relative to the rows.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
@@ -127,6 +129,7 @@ pub struct SyntheticGround {
     mounting: crate::camera::Mounting,
     seed: u64,
     field: crate::synth::Field,
+    photo: Option<Arc<PhotoGround>>,
 }
 
 impl SyntheticGround {
@@ -166,7 +169,19 @@ impl SyntheticGround {
             mounting: cal.mounting,
             seed: o.seed,
             field,
+            photo: None,
         })
+    }
+
+    /// The field's ground textured from a photograph of real rows, at its rectification's
+    /// row spacing. Refused (naming the option) with curved rows, an empty stretch or the
+    /// rows' end, which a photograph's ground cannot show.
+    pub fn with_photo_ground(mut self, ground: Arc<PhotoGround>) -> Result<Self, SimError> {
+        self.base.row_spacing_m = ground.row_spacing_m();
+        Scene::new(&self.base, self.seed, &self.mounting)?.with_photo_ground(ground.clone())?;
+        self.field = crate::synth::Field::new(&self.base, self.seed, [0.0, 0.0]);
+        self.photo = Some(ground);
+        Ok(self)
     }
 }
 
@@ -182,7 +197,10 @@ impl Ground for SyntheticGround {
             along_m: camera.along_m,
             ..self.base.clone()
         };
-        let scene = Scene::new(&o, self.seed, &self.mounting)?;
+        let mut scene = Scene::new(&o, self.seed, &self.mounting)?;
+        if let Some(g) = &self.photo {
+            scene = scene.with_photo_ground(g.clone())?;
+        }
         buf.resize(self.renderer.buffer_len(o.style), 0);
         self.renderer.render_into(&scene, buf)?;
         let (w, h) = self.renderer.size();

@@ -5,13 +5,16 @@
 //! The field is the synthetic field of [`crate::synth`] (a fixed lattice of plants, so it
 //! stays put while the robot moves); the renderer is built once and renders into a recycled
 //! buffer. Each frame carries its [`GroundTruth`], so the published estimates can be checked
-//! live. Frames are due at `start + i / fps`; a renderer slower than that delivers late
+//! live. The frames go through an ideal lens of the options' size, or through a given
+//! calibration ([`SyntheticDrive::through`]); the ground can be a photograph's
+//! ([`SyntheticDrive::with_photo_ground`]: real plants, straight rows). Frames are due at `start + i / fps`; a renderer slower than that delivers late
 //! frames rather than skipping any.
 
 use super::{Poll, Source, SourceError, SourceState};
 use crate::camera::{Calibration, IdealLens};
 use crate::check::{Check, Raw};
 use crate::frame::{now_ns, Frame};
+use crate::synth::photo::PhotoGround;
 use crate::synth::{GroundTruth, Renderer, Scene, Style, SynthError, SynthOptions};
 use serde::Deserialize;
 use std::f64::consts::TAU;
@@ -196,24 +199,33 @@ pub struct SyntheticDrive {
     seq: u64,
     state: SourceState,
     spare: Vec<u8>,
+    photo: Option<Arc<PhotoGround>>,
 }
 
 impl SyntheticDrive {
-    /// Builds the renderer (heavy, once).
+    /// Builds the renderer (heavy, once) for the options' ideal lens at their size.
     pub fn new(opts: SyntheticDriveOptions) -> Result<Self, SynthError> {
         let cal = opts
             .lens
             .calibration(opts.height, opts.width)
             .map_err(|e| SynthError::Calibration(e.to_string()))?;
+        Self::through(opts, cal)
+    }
+
+    /// The drive rendered through `cal` (its size; the options' lens, width and height are
+    /// not used). Bayer frames need even sides: with an odd one, `colour` gives RGB frames.
+    pub fn through(mut opts: SyntheticDriveOptions, cal: Calibration) -> Result<Self, SynthError> {
+        (opts.height, opts.width) = cal.size();
+        let whole_quads = opts.width % 2 == 0 && opts.height % 2 == 0;
         let mut renderer = Renderer::new(&cal)?;
         if opts.render_threads > 0 {
             renderer = renderer.with_threads(opts.render_threads);
         }
         let base = SynthOptions {
-            style: if opts.colour {
-                Style::Bayer
-            } else {
-                Style::Grey
+            style: match (opts.colour, whole_quads) {
+                (true, true) => Style::Bayer,
+                (true, false) => Style::Colour,
+                (false, _) => Style::Grey,
             },
             plant_distance_m: 0.05,
             samples: 2,
@@ -239,7 +251,20 @@ impl SyntheticDrive {
             seq: 0,
             state: SourceState::Starting,
             spare: Vec::new(),
+            photo: None,
         })
+    }
+
+    /// The drive over a photograph's ground: its real plants, tiled along and across the
+    /// rows at its rectification's spacing. Only straight rows with neither an empty
+    /// stretch nor an end: an error names the drive's option that does not fit.
+    pub fn with_photo_ground(mut self, ground: Arc<PhotoGround>) -> Result<Self, SynthError> {
+        self.base.row_spacing_m = ground.row_spacing_m();
+        // the scene checks what a photograph's ground cannot show
+        Scene::new(&self.base, self.opts.seed, &self.cal.mounting)?
+            .with_photo_ground(ground.clone())?;
+        self.photo = Some(ground);
+        Ok(self)
     }
 
     /// The calibration the frames are rendered through (the detector should use it).
@@ -280,7 +305,10 @@ impl SyntheticDrive {
             along_m: along,
             ..self.base.clone()
         };
-        let scene = Scene::new(&o, self.opts.seed, &self.cal.mounting)?;
+        let mut scene = Scene::new(&o, self.opts.seed, &self.cal.mounting)?;
+        if let Some(g) = &self.photo {
+            scene = scene.with_photo_ground(g.clone())?;
+        }
         let mut buf = std::mem::take(&mut self.spare);
         buf.resize(self.renderer.buffer_len(o.style), 0);
         self.renderer.render_into(&scene, &mut buf)?;
@@ -290,9 +318,14 @@ impl SyntheticDrive {
 
 impl Source for SyntheticDrive {
     fn describe(&self) -> String {
+        let ground = if self.photo.is_some() {
+            ", a photograph's ground"
+        } else {
+            ""
+        };
         format!(
-            "synthetic drive ({:?}, {}x{}, {} fps, seed {})",
-            self.opts.lens, self.opts.width, self.opts.height, self.opts.fps, self.opts.seed
+            "synthetic drive ({}x{}, {} fps, seed {}{ground})",
+            self.opts.width, self.opts.height, self.opts.fps, self.opts.seed
         )
     }
 

@@ -113,38 +113,57 @@ pub fn choose(
     row_spacing_m: f64,
     seed: u64,
 ) -> anyhow::Result<(PhotoGround, PathBuf)> {
+    let mut one = choose_many(args, row_spacing_m, seed, 1)?;
+    Ok(one.remove(0))
+}
+
+/// Up to `n` photographs' grounds: from `--photo-index` (or position `seed` mod count) on,
+/// the first `n` that fit, in order. With `--photo-index` the first must fit. Fewer than
+/// `n` when the folder holds fewer that fit; an error, listing the photographs rejected and
+/// why, when none does.
+pub fn choose_many(
+    args: &PhotoArgs,
+    row_spacing_m: f64,
+    seed: u64,
+    n: usize,
+) -> anyhow::Result<Vec<(PhotoGround, PathBuf)>> {
     let (Some(dir), Some(label_dir)) = (&args.images, &args.labels) else {
         bail!("--images and --labels go together");
     };
     let images = list_images(dir)?;
     let opts = args.options(row_spacing_m);
-    if let Some(i) = args.photo_index {
-        let Some(image) = images.get(i) else {
-            bail!(
-                "--photo-index {i}: {} holds {} photographs (0..{})",
-                dir.display(),
-                images.len(),
-                images.len()
-            );
-        };
-        return match ground_of(image, label_dir, &opts) {
-            Ok(g) => Ok((g, image.clone())),
-            Err(e) => bail!("{}: rejected: {e}", image.display()),
-        };
-    }
-    let start = (seed % images.len() as u64) as usize;
+    let start = match args.photo_index {
+        Some(i) if i >= images.len() => bail!(
+            "--photo-index {i}: {} holds {} photographs (0..{})",
+            dir.display(),
+            images.len(),
+            images.len()
+        ),
+        Some(i) => i,
+        None => (seed % images.len() as u64) as usize,
+    };
     let mut refused = Vec::new();
+    let mut chosen = Vec::new();
     for k in 0..images.len() {
         let image = &images[(start + k) % images.len()];
         match ground_of(image, label_dir, &opts) {
             Ok(g) => {
-                for (name, why) in &refused {
-                    tracing::info!("{name}: rejected: {why}");
+                chosen.push((g, image.clone()));
+                if chosen.len() == n {
+                    break;
                 }
-                return Ok((g, image.clone()));
+            }
+            Err(e) if k == 0 && args.photo_index.is_some() => {
+                bail!("{}: rejected: {e}", image.display())
             }
             Err(e) => refused.push((image.display().to_string(), e)),
         }
+    }
+    if !chosen.is_empty() {
+        for (name, why) in &refused {
+            tracing::info!("{name}: rejected: {why}");
+        }
+        return Ok(chosen);
     }
     let shown: Vec<String> = refused
         .iter()
