@@ -258,11 +258,12 @@ impl Estimate {
         }
     }
 
-    /// Runs row guidance on this estimate (frames in capture order): a frame with status
-    /// `ok` measures, any other only advances the tracker (nothing claims to be a row).
+    /// Runs row guidance on this estimate (frames in capture order): a frame with a
+    /// vanishing point (`ok` or `degraded`) measures, and the comb's fit and the tracker's
+    /// gate judge the measurement; any other only advances the tracker.
     pub fn apply_guidance(&mut self, guidance: &mut Guidance) {
         let vp = match self.status {
-            Status::Ok => self.vanishing_point,
+            Status::Ok | Status::Degraded => self.vanishing_point,
             _ => None,
         };
         let mut out = self.guidance.take().unwrap_or_default();

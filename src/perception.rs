@@ -360,4 +360,30 @@ mod tests {
             .unwrap();
         assert_eq!(est.status, Status::Degraded, "quality {}", est.quality);
     }
+
+    #[test]
+    fn a_degraded_frame_still_measures_for_guidance() {
+        // every frame below the (impossible) minimum quality: published `degraded`, yet
+        // its vanishing point and rows go to guidance, which tracks on them
+        let mut d = drive();
+        let cal = d.calibration().clone();
+        let opts = PerceptionOptions {
+            min_quality: 1.0,
+            ..Default::default()
+        };
+        let mut p = Perception::new(&cal, &opts).unwrap();
+        for seq in 0..4 {
+            let est = p.process(&d.frame_at(seq).unwrap()).unwrap();
+            assert_eq!(est.status, Status::Degraded, "frame {seq}");
+            let g = est.guidance.expect("guidance on every frame");
+            assert!(g.frame.is_some(), "frame {seq}: measured");
+            let truth = est.truth.as_ref().unwrap();
+            let off = g.lateral_offset_m.expect("an offset");
+            let path = truth.path();
+            assert!(
+                (off - truth.path_offset_m(path)).abs() < 0.03,
+                "frame {seq}: {off}"
+            );
+        }
+    }
 }
