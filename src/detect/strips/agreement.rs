@@ -26,6 +26,8 @@ pub(super) struct SeenColumns {
     s2: Vec<f64>,
     pub(super) w: Vec<f64>,
     pub(super) strip: Vec<u32>,
+    /// The strips again as f64, so that every lane of the pair sum is 64 bits wide.
+    strip_f: Vec<f64>,
 }
 
 impl SeenColumns {
@@ -34,6 +36,7 @@ impl SeenColumns {
         self.s2.clear();
         self.w.clear();
         self.strip.clear();
+        self.strip_f.clear();
     }
 
     fn push(&mut self, u: f64, s: f64, w: f64, strip: u32) {
@@ -41,6 +44,7 @@ impl SeenColumns {
         self.s2.push(s * s);
         self.w.push(w);
         self.strip.push(strip);
+        self.strip_f.push(strip as f64);
     }
 
     pub(super) fn len(&self) -> usize {
@@ -57,7 +61,7 @@ impl SeenColumns {
     /// Σ over the pairs of peaks from different strips of wᵢwⱼ·K(Δu / √(sᵢ² + sⱼ²)) and the
     /// peaks' total weight; K the triweight kernel with a standard deviation of 1.
     fn pair_sum(&self) -> (f64, f64) {
-        pair_sum(&self.u, &self.s2, &self.w, &self.strip)
+        pair_sum(&self.u, &self.s2, &self.w, &self.strip_f)
     }
 }
 
@@ -192,7 +196,7 @@ fn split(
 /// [`SeenColumns::pair_sum`] on the columns. Compiled also for AVX2 (four lanes in one
 /// register), chosen at run time; the same operations in the same order either way.
 #[multiversion(targets("x86_64+avx2"))]
-fn pair_sum(u: &[f64], s2: &[f64], w: &[f64], strip: &[u32]) -> (f64, f64) {
+fn pair_sum(u: &[f64], s2: &[f64], w: &[f64], strip: &[f64]) -> (f64, f64) {
     let s2_max = s2.iter().fold(0.0f64, |m, &x| m.max(x));
     let (mut num, mut total) = (0.0, 0.0);
     let mut end = 0;
@@ -215,11 +219,11 @@ fn pair_sum(u: &[f64], s2: &[f64], w: &[f64], strip: &[u32]) -> (f64, f64) {
 /// than peak `i`; K the triweight kernel with a standard deviation of 1. Branch-free in
 /// four lanes: a pair outside the kernel's support or within one strip adds zero.
 #[inline(always)]
-fn pairs(u: &[f64], s2: &[f64], w: &[f64], strip: &[u32], i: usize, end: usize) -> f64 {
+fn pairs(u: &[f64], s2: &[f64], w: &[f64], strip: &[f64], i: usize, end: usize) -> f64 {
     let (xu, xs2, xstrip) = (u[i], s2[i], strip[i]);
     let r = i + 1..end;
     let (u, s2, w, st) = (&u[r.clone()], &s2[r.clone()], &w[r.clone()], &strip[r]);
-    let term = |u: f64, s2: f64, w: f64, st: u32| {
+    let term = |u: f64, s2: f64, w: f64, st: f64| {
         let du = u - xu;
         let k = 1.0 - du * du / (9.0 * (xs2 + s2));
         let k = if k > 0.0 { k } else { 0.0 };
@@ -287,7 +291,7 @@ mod tests {
             .collect();
         seen.sort_by(|x, y| x.u.total_cmp(&y.u));
         let c = columns(&seen);
-        let pairs = |c: &SeenColumns, i, end| pairs(&c.u, &c.s2, &c.w, &c.strip, i, end);
+        let pairs = |c: &SeenColumns, i, end| pairs(&c.u, &c.s2, &c.w, &c.strip_f, i, end);
         let direct = |i: usize, end: usize| -> f64 {
             let x = seen[i];
             seen[i + 1..end]
