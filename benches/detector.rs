@@ -262,9 +262,10 @@ fn small_frame() -> (omnirow::camera::Calibration, Vec<u8>) {
     (cal, data)
 }
 
-/// The default detector (`auto`: the strips method for this perspective lens), the combined
-/// and the Hough method on a 640×480 RGB frame, each with and without the prior (the pencil
-/// and the strips ignore it); prints each one's thread CPU time per frame.
+/// The default detector (`auto`: the strips method for this perspective lens; also on two
+/// threads), the combined and the Hough method on a 640×480 RGB frame, each with and without
+/// the prior (the pencil and the strips ignore it); prints each one's thread CPU time per
+/// frame.
 fn bench_small(c: &mut Criterion) {
     let (cal, data) = small_frame();
     let view = ImageView::new(640, 480, PixelFormat::Rgb8, &data).unwrap();
@@ -275,12 +276,20 @@ fn bench_small(c: &mut Criterion) {
             method,
             ..Default::default()
         };
-        let mut det = Detector::new(&cal, opts).unwrap();
+        let mut det = Detector::new(&cal, opts.clone()).unwrap();
         let mut out = Detection::default();
         det.process(&view, &mut out).unwrap();
         let prior = narrow_prior(&out);
         let name = method.name();
         g.bench_function(name, |b| b.iter(|| det.process(&view, &mut out).unwrap()));
+        if method == Method::Auto {
+            let mut two = Detector::new(&cal, opts.clone()).unwrap();
+            two.set_threads(2).unwrap();
+            two.process(&view, &mut out).unwrap();
+            g.bench_function(format!("{name}_2_threads"), |b| {
+                b.iter(|| two.process(&view, &mut out).unwrap())
+            });
+        }
         g.bench_function(format!("{name}_narrowed"), |b| {
             b.iter(|| {
                 det.process_with_prior(&view, Some(&prior), &mut out)

@@ -14,6 +14,14 @@ use rayon::ThreadPool;
 /// Uncertainty (sigma, pixels) of a peak's position: the kernel's width in the agreement.
 pub(super) const PEAK_SIGMA_PX: f64 = 4.0;
 
+/// The share of the peaks, the most prominent, on which the search's coarse grid reads the
+/// agreement ([`StripsRows::keep_strong_peaks`]): its pairs are the pairs that rank the
+/// coarse grid's maxima, and the weakest third's are most of the rest (a weak peak pairs with
+/// every peak within the kernel's reach as a strong one does). On CRDLD (500 images, both
+/// focal-length guesses) the same scores as all the peaks at 0.8× the detector's time; the
+/// strongest half loses rows (docs/detector.md, "Where the strips' time goes").
+pub(super) const COARSE_PEAKS_SHARE: f64 = 2.0 / 3.0;
+
 /// Peaks nearer the horizon than this (pixels below the candidate vanishing point) take no
 /// part in the agreement, the comb or the rows' lines: there the rows merge.
 pub(super) const MIN_DEPTH_PX: f64 = 12.0;
@@ -26,6 +34,8 @@ pub(super) struct SeenColumns {
     s2: Vec<f64>,
     pub(super) w: Vec<f64>,
     pub(super) strip: Vec<u32>,
+    /// The strips again as f64, so that every lane of the pair sum is 64 bits wide.
+    strip_f: Vec<f64>,
 }
 
 impl SeenColumns {
@@ -34,6 +44,7 @@ impl SeenColumns {
         self.s2.clear();
         self.w.clear();
         self.strip.clear();
+        self.strip_f.clear();
     }
 
     fn push(&mut self, u: f64, s: f64, w: f64, strip: u32) {
@@ -41,6 +52,7 @@ impl SeenColumns {
         self.s2.push(s * s);
         self.w.push(w);
         self.strip.push(strip);
+        self.strip_f.push(strip as f64);
     }
 
     pub(super) fn len(&self) -> usize {
@@ -57,7 +69,7 @@ impl SeenColumns {
     /// Σ over the pairs of peaks from different strips of wᵢwⱼ·K(Δu / √(sᵢ² + sⱼ²)) and the
     /// peaks' total weight; K the triweight kernel with a standard deviation of 1.
     fn pair_sum(&self) -> (f64, f64) {
-        pair_sum(&self.u, &self.s2, &self.w, &self.strip)
+        pair_sum(&self.u, &self.s2, &self.w, &self.strip_f)
     }
 }
 
@@ -123,8 +135,9 @@ impl StripsRows {
     /// The agreements at the candidates `self.cand` (along, below) into `self.vals`, the
     /// candidates split across `pool`'s threads (each with its own [`Sight`]) when there is
     /// one: the same values as one after the other, since each is a function of the peaks
-    /// and its point alone. Counts the candidates in [`super::StripsResult::evaluated`].
-    pub(super) fn agreements(&mut self, pool: Option<&ThreadPool>) {
+    /// and its point alone. On the strong peaks alone ([`Self::keep_strong_peaks`]) with
+    /// `strong`. Counts the candidates in [`super::StripsResult::evaluated`].
+    pub(super) fn agreements(&mut self, pool: Option<&ThreadPool>, strong: bool) {
         let n = self.cand.len();
         self.last.evaluated += n;
         self.vals.clear();
@@ -134,7 +147,7 @@ impl StripsRows {
         while self.sights.len() + 1 < parts {
             self.sights.push(Sight::default());
         }
-        let peaks = &self.peaks;
+        let peaks = if strong { &self.strong } else { &self.peaks };
         match pool {
             Some(pool) if parts > 1 => split(
                 pool,
@@ -146,6 +159,26 @@ impl StripsRows {
             ),
             _ => evaluate(peaks, &self.cand, &mut self.vals, &mut self.sight),
         }
+    }
+}
+
+impl StripsRows {
+    /// The peaks the coarse grid reads into `self.strong`: the strongest
+    /// [`COARSE_PEAKS_SHARE`] of them by prominence, in the strips' order.
+    pub(super) fn keep_strong_peaks(&mut self) {
+        self.strong.clear();
+        if self.peaks.is_empty() {
+            return;
+        }
+        self.scratch.clear();
+        self.scratch.extend(self.peaks.iter().map(|k| k.w));
+        let n = self.scratch.len();
+        let weakest = ((1.0 - COARSE_PEAKS_SHARE) * n as f64) as usize;
+        let (_, &mut cut, _) = self
+            .scratch
+            .select_nth_unstable_by(weakest.min(n - 1), f64::total_cmp);
+        self.strong
+            .extend(self.peaks.iter().filter(|k| k.w >= cut).copied());
     }
 }
 
@@ -192,7 +225,7 @@ fn split(
 /// [`SeenColumns::pair_sum`] on the columns. Compiled also for AVX2 (four lanes in one
 /// register), chosen at run time; the same operations in the same order either way.
 #[multiversion(targets("x86_64+avx2"))]
-fn pair_sum(u: &[f64], s2: &[f64], w: &[f64], strip: &[u32]) -> (f64, f64) {
+fn pair_sum(u: &[f64], s2: &[f64], w: &[f64], strip: &[f64]) -> (f64, f64) {
     let s2_max = s2.iter().fold(0.0f64, |m, &x| m.max(x));
     let (mut num, mut total) = (0.0, 0.0);
     let mut end = 0;
@@ -215,11 +248,11 @@ fn pair_sum(u: &[f64], s2: &[f64], w: &[f64], strip: &[u32]) -> (f64, f64) {
 /// than peak `i`; K the triweight kernel with a standard deviation of 1. Branch-free in
 /// four lanes: a pair outside the kernel's support or within one strip adds zero.
 #[inline(always)]
-fn pairs(u: &[f64], s2: &[f64], w: &[f64], strip: &[u32], i: usize, end: usize) -> f64 {
+fn pairs(u: &[f64], s2: &[f64], w: &[f64], strip: &[f64], i: usize, end: usize) -> f64 {
     let (xu, xs2, xstrip) = (u[i], s2[i], strip[i]);
     let r = i + 1..end;
     let (u, s2, w, st) = (&u[r.clone()], &s2[r.clone()], &w[r.clone()], &strip[r]);
-    let term = |u: f64, s2: f64, w: f64, st: u32| {
+    let term = |u: f64, s2: f64, w: f64, st: f64| {
         let du = u - xu;
         let k = 1.0 - du * du / (9.0 * (xs2 + s2));
         let k = if k > 0.0 { k } else { 0.0 };
@@ -287,7 +320,7 @@ mod tests {
             .collect();
         seen.sort_by(|x, y| x.u.total_cmp(&y.u));
         let c = columns(&seen);
-        let pairs = |c: &SeenColumns, i, end| pairs(&c.u, &c.s2, &c.w, &c.strip, i, end);
+        let pairs = |c: &SeenColumns, i, end| pairs(&c.u, &c.s2, &c.w, &c.strip_f, i, end);
         let direct = |i: usize, end: usize| -> f64 {
             let x = seen[i];
             seen[i + 1..end]
@@ -320,6 +353,32 @@ mod tests {
             },
         ]);
         assert_eq!(pairs(&c, 0, 2), 0.0);
+    }
+
+    #[test]
+    fn the_coarse_grid_reads_the_strongest_two_thirds_of_the_peaks_in_their_order() {
+        use super::super::testing::forward_camera;
+        use super::super::StripsOptions;
+        let mut s = StripsRows::new(StripsOptions::default(), 15.0, &forward_camera()).unwrap();
+        s.keep_strong_peaks();
+        assert!(s.strong.is_empty());
+        let mut r = uniform(5);
+        s.peaks = (0..90)
+            .map(|i| Peak {
+                a: 100.0 * r(),
+                p: (i / 9) as f64 * 11.0,
+                w: r(),
+                strip: (i / 9) as u32,
+            })
+            .collect();
+        s.keep_strong_peaks();
+        assert_eq!(s.strong.len(), 60);
+        let weakest_kept = s.strong.iter().map(|k| k.w).fold(f64::MAX, f64::min);
+        let dropped = s.peaks.iter().filter(|k| k.w < weakest_kept).count();
+        assert_eq!(dropped, 30);
+        // a subsequence of the peaks: the strips' order, deepest last
+        let mut rest = s.peaks.iter();
+        assert!(s.strong.iter().all(|k| rest.any(|x| x == k)));
     }
 
     #[test]

@@ -164,6 +164,8 @@ pub struct StripsRows {
     peaks: Vec<Peak>,
     /// The search's grid of agreements.
     grid: Vec<f64>,
+    /// The strongest peaks, on which the search's coarse grid is read.
+    strong: Vec<Peak>,
     /// The prior's vanishing point (unit) and window half-angle, when narrowed.
     prior: Option<(Vector3<f64>, f64)>,
     /// The grid's local maxima (agreement, column, row), best first; in the search, once
@@ -225,6 +227,7 @@ impl StripsRows {
             scratch: Vec::new(),
             peaks: Vec::new(),
             grid: Vec::new(),
+            strong: Vec::new(),
             prior: None,
             starts: Vec::new(),
             sight: Sight::default(),

@@ -1,7 +1,7 @@
 //! The search for the vanishing point whose pencil lines the strips' peaks up best (the
 //! highest agreement) within the heading and tilt limits, or within a prior's window: a grid
-//! `SEARCH_STEP_PX` apart (first every other point, then in full only around the coarser
-//! grid's best), its best local maxima climbed by halving steps to 1 px, and of the summits
+//! `SEARCH_STEP_PX` apart (first every other point on the strongest peaks, then in full only
+//! around that coarser grid's best), its best local maxima climbed by halving steps to 1 px, and of the summits
 //! they reach the highest, or a nearby one that the comb prefers in a near tie.
 
 use super::StripsRows;
@@ -15,8 +15,9 @@ const SEARCH_STEP_PX: f64 = 8.0;
 /// How many of the grid's best local maxima are climbed to 1 px.
 const SEARCH_STARTS: usize = 3;
 
-/// The grid is first evaluated at twice its step, and then in full only within one coarse
-/// step of that coarser grid's this many best local maxima.
+/// The grid is first evaluated at twice its step on the strongest peaks
+/// ([`super::agreement::COARSE_PEAKS_SHARE`]), and then in full on all of them only within
+/// one coarse step of that coarser grid's this many best local maxima.
 const SEARCH_REGIONS: usize = 6;
 
 /// The climbed summits near the highest are ranked by their agreement times the comb's
@@ -187,9 +188,9 @@ impl StripsRows {
 
     /// The agreement on the grid of `na` × `np` candidates `step` apart from (a0, p0) (`at`:
     /// a0, p0, step) into `self.grid`. With `regions` > 0 only where it can hold the grid's
-    /// best: every other candidate first (a grid twice as coarse), then the full grid within
-    /// one coarse step of that coarse grid's `regions` best local maxima; the candidates not
-    /// evaluated are NaN, and so neither a maximum nor higher than one. Each pass's
+    /// best: every other candidate first (a grid twice as coarse) on the strongest peaks,
+    /// then the full grid on all the peaks within one coarse step of that coarse grid's
+    /// `regions` best local maxima; the candidates not evaluated there are NaN, and so neither a maximum nor higher than one. Each pass's
     /// candidates are evaluated at once on `pool`'s threads.
     fn fill_grid(
         &mut self,
@@ -213,12 +214,16 @@ impl StripsRows {
                     .extend((0..na).step_by(stride).map(|i| j * na + i));
             }
         }
-        self.evaluate_cells(at, na, pool);
         if regions == 0 {
+            self.evaluate_cells(at, na, pool, false);
             return;
         }
+        self.keep_strong_peaks();
+        self.evaluate_cells(at, na, pool, true);
         self.grid_maxima(na, np, 2);
         self.starts.truncate(regions);
+        // the coarse grid's values were read on the strong peaks alone: all read again
+        self.grid.fill(f64::NAN);
         self.cells.clear();
         for k in 0..self.starts.len() {
             let (_, ci, cj) = self.starts[k];
@@ -233,12 +238,12 @@ impl StripsRows {
                 }
             }
         }
-        self.evaluate_cells(at, na, pool);
+        self.evaluate_cells(at, na, pool, false);
     }
 
     /// The agreement at each grid cell in `self.cells` (`at`: the grid's a0, p0 and step;
-    /// `na` its columns) into `self.grid`.
-    fn evaluate_cells(&mut self, at: [f64; 3], na: usize, pool: Option<&ThreadPool>) {
+    /// `na` its columns) into `self.grid`, on the strong peaks alone with `strong`.
+    fn evaluate_cells(&mut self, at: [f64; 3], na: usize, pool: Option<&ThreadPool>, strong: bool) {
         let [a0, p0, step] = at;
         self.cand.clear();
         self.cand.extend(
@@ -246,7 +251,7 @@ impl StripsRows {
                 .iter()
                 .map(|&c| [a0 + (c % na) as f64 * step, p0 + (c / na) as f64 * step]),
         );
-        self.agreements(pool);
+        self.agreements(pool, strong);
         for (&c, &v) in self.cells.iter().zip(&self.vals) {
             self.grid[c] = v;
         }
@@ -297,7 +302,7 @@ impl StripsRows {
                     .iter()
                     .map(|&(da, dp)| [ca + da * st, cp + dp * st]),
             );
-            self.agreements(pool);
+            self.agreements(pool, false);
             for (c, &e) in self.cand.iter().zip(&self.vals) {
                 if e > here.0 {
                     here = (e, c[0], c[1]);
