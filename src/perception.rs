@@ -318,7 +318,8 @@ mod tests {
             let est = p.process(&d.frame_at(seq).unwrap()).unwrap();
             assert_eq!(est.status, Status::Ok, "frame {seq}");
             let g = est.guidance.expect("guidance on every frame");
-            assert!(g.lateral_offset_m.is_some(), "frame {seq}");
+            // the tracker starts on two agreeing frames
+            assert_eq!(g.lateral_offset_m.is_some(), seq > 0, "frame {seq}");
             assert!(est.row_fit.is_some(), "frame {seq}");
             // every stage's time is measured
             assert!(
@@ -377,6 +378,9 @@ mod tests {
             assert_eq!(est.status, Status::Degraded, "frame {seq}");
             let g = est.guidance.expect("guidance on every frame");
             assert!(g.frame.is_some(), "frame {seq}: measured");
+            if seq == 0 {
+                continue; // the tracker starts on the second frame
+            }
             let truth = est.truth.as_ref().unwrap();
             let off = g.lateral_offset_m.expect("an offset");
             let path = truth.path();

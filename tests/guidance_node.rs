@@ -46,7 +46,10 @@ fn run_config(cfg: &std::path::Path, frames: u32, timeout: Duration) -> Vec<Esti
 fn published_offset_and_heading_match_the_drive_truth() {
     let est = drive("truth", 45, "");
     let mut errs = Vec::new();
-    for e in &est {
+    // the tracker starts on two agreeing frames: the first has no estimate
+    let first = est[0].guidance.as_ref().unwrap();
+    assert_eq!(first.tracking, TrackState::Lost);
+    for e in &est[1..] {
         assert_eq!(e.schema_version, 2);
         let g = e.guidance.as_ref().expect("guidance on by default");
         let t = e.truth.as_ref().unwrap();
@@ -92,7 +95,10 @@ fn curvature_of_a_curved_drive_matches_its_radius() {
     )
     .unwrap();
     let est = run_config(&cfg, 30, Duration::from_secs(120));
-    for e in &est {
+    // the tracker starts on two agreeing frames: the first has no estimate
+    let first = est[0].guidance.as_ref().unwrap();
+    assert_eq!(first.tracking, TrackState::Lost);
+    for e in &est[1..] {
         let g = e.guidance.as_ref().unwrap();
         let t = e.truth.as_ref().unwrap();
         assert_eq!(t.curvature_per_m, 0.05);
@@ -191,7 +197,10 @@ fn crossing_to_the_next_path_is_followed_without_a_jump() {
     let est = run_config(&cfg, 180, Duration::from_secs(180));
     let mut last: Option<f64> = None;
     let mut worst = 0.0f64;
-    for e in &est {
+    // the tracker starts on two agreeing frames: the first has no estimate
+    let first = est[0].guidance.as_ref().unwrap();
+    assert_eq!(first.tracking, TrackState::Lost);
+    for e in &est[1..] {
         let g = e.guidance.as_ref().unwrap();
         let t = e.truth.as_ref().unwrap();
         assert_ne!(g.tracking, TrackState::Lost, "frame {}", e.seq);
@@ -208,7 +217,7 @@ fn crossing_to_the_next_path_is_followed_without_a_jump() {
         last = Some(off);
     }
     assert!(worst < 0.03, "worst offset error {worst}");
-    let first = est[0].guidance.as_ref().unwrap();
+    let first = est[1].guidance.as_ref().unwrap();
     let end = est[179].guidance.as_ref().unwrap();
     assert_eq!(est[179].truth.as_ref().unwrap().path(), 1);
     assert_eq!((first.row_index, end.row_index), (Some(0), Some(-1)));

@@ -760,7 +760,9 @@ mod tests {
             let mut g = Guidance::new(opts, Mounting::default()).unwrap();
             let (vp, normals) = view(yaw, pitch, 0.0, cam_y, 1.0, 0.5, -6..=6);
             let mut out = GuidanceEstimate::default();
-            g.update(1, Some(vp), normals, None, &mut out);
+            // the same frame twice: two agreeing measurements start the tracker
+            g.update(1, Some(vp), normals.clone(), None, &mut out);
+            g.update(2, Some(vp), normals, None, &mut out);
             let f = out.frame.unwrap();
             let line = if over_row { 0.0 } else { 0.25 };
             let truth = wrap(cam_y - line, 0.5);
@@ -873,7 +875,8 @@ mod tests {
         let mut g = Guidance::new(GuidanceOptions::default(), Mounting::default()).unwrap();
         let mut out = GuidanceEstimate::default();
         let (vp, normals) = view(0.0, 0.0, 0.0, 0.3, 1.0, 0.5, -5..=5);
-        g.update(1, Some(vp), normals, None, &mut out);
+        g.update(1, Some(vp), normals.clone(), None, &mut out);
+        g.update(2, Some(vp), normals, None, &mut out);
         assert!(!out.rows.is_empty());
         g.update(100_000_000, None, [], None, &mut out);
         assert_eq!(out.tracking, TrackState::Coasting);

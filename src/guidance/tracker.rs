@@ -14,8 +14,11 @@
 //! A frame measures the offset only modulo the spacing (from the nearest comb line); the
 //! tracker unwraps it to the multiple nearest its prediction, so the followed line keeps its
 //! identity however far the robot drifts (no jump to the neighbouring row). Measurements
-//! whose innovation fails a χ² gate are rejected as outliers. Fixed-size matrices on the
-//! stack: an update allocates nothing.
+//! whose innovation fails a χ² gate are rejected as outliers. The filter starts (and
+//! restarts after `lost`) only on two consecutive measurements that agree on the nearest
+//! line ([`START_AGREEMENT`]): one frame's comb can miss by most of a spacing, and the line
+//! the filter starts on is the one it then follows. Fixed-size matrices on the stack: an
+//! update allocates nothing.
 
 use nalgebra::{Matrix3, Matrix3x4, Matrix4, Vector3, Vector4};
 use serde::{Deserialize, Serialize};
@@ -87,6 +90,13 @@ impl Default for TrackerOptions {
     }
 }
 
+/// Two consecutive measurements start the filter when their offsets differ by less than
+/// this share of the spacing (the same nearest line) and their headings by less than
+/// [`START_HEADING_RAD`].
+pub const START_AGREEMENT: f64 = 0.25;
+/// See [`START_AGREEMENT`]: 3°.
+pub const START_HEADING_RAD: f64 = 0.0524;
+
 /// One frame's single-image answer, as the tracker takes it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Measurement {
@@ -100,6 +110,12 @@ pub struct Measurement {
     /// The followed line's curvature and its standard deviation, 1/m, when the frame
     /// measured it (folded in after the rest, with its own gate).
     pub curvature: Option<(f64, f64)>,
+}
+
+/// Whether two consecutive measurements agree enough to start the filter on ([`START_AGREEMENT`]).
+fn starts_together(a: &Measurement, b: &Measurement) -> bool {
+    (a.offset_m - b.offset_m).abs() < START_AGREEMENT * b.spacing_m
+        && (a.heading_rad - b.heading_rad).abs() < START_HEADING_RAD
 }
 
 /// The tracked estimate after a frame.
@@ -127,6 +143,8 @@ pub struct Tracker {
     /// Speed (m/s) and yaw rate (rad/s) for the next prediction, when given
     /// ([`Self::set_motion`]); otherwise the configured speed and no yaw rate.
     motion: Option<(f64, f64)>,
+    /// While lost: the last frame's measurement, which the next must agree with to start.
+    pending: Option<Measurement>,
 }
 
 impl Tracker {
@@ -140,6 +158,7 @@ impl Tracker {
             last_accept_ns: 0,
             rejected_total: 0,
             motion: None,
+            pending: None,
         }
     }
 
@@ -162,8 +181,14 @@ impl Tracker {
     pub fn update(&mut self, t_ns: u64, m: Option<&Measurement>) -> Tracked {
         let was_lost = self.state == TrackState::Lost;
         if was_lost {
+            let agreed = match (self.pending.take(), m) {
+                (Some(p), Some(m)) => starts_together(&p, m),
+                _ => false,
+            };
+            self.pending = m.copied();
             return match m {
-                Some(m) => {
+                Some(m) if agreed => {
+                    self.pending = None;
                     self.start(t_ns, m);
                     self.state = if self.last_accept_ns == 0 {
                         TrackState::Tracking
@@ -173,7 +198,7 @@ impl Tracker {
                     self.last_accept_ns = t_ns.max(1);
                     self.tracked(false)
                 }
-                None => self.tracked(false),
+                _ => self.tracked(false),
             };
         }
         let dt = (t_ns.saturating_sub(self.t_ns) as f64 / 1e9).min(10.0);
@@ -339,6 +364,11 @@ mod tests {
         for i in 0..120u64 {
             let e = 0.1 * i as f64 / 15.0;
             let r = t.update(1 + i * dt, Some(&meas(wrap(e, 0.5), 0.0)));
+            if i == 0 {
+                // one measurement does not start the filter
+                assert_eq!(r.state, TrackState::Lost);
+                continue;
+            }
             assert_eq!(r.state, TrackState::Tracking, "frame {i}: {:?}", r.state);
             let x = r.x.unwrap();
             assert!((x[0] - e).abs() < 0.01, "frame {i}: {} vs {e}", x[0]);
@@ -355,8 +385,9 @@ mod tests {
         };
         let mut t = Tracker::new(o);
         assert_eq!(t.update(1, None).state, TrackState::Lost);
+        assert_eq!(t.update(2, Some(&meas(0.1, 0.0))).state, TrackState::Lost);
         assert_eq!(
-            t.update(2, Some(&meas(0.1, 0.0))).state,
+            t.update(3, Some(&meas(0.1, 0.0))).state,
             TrackState::Tracking
         );
         let s = 1_000_000_000u64;
@@ -366,6 +397,15 @@ mod tests {
         assert!(r.p.unwrap()[(0, 0)] > 0.005f64.powi(2));
         assert_eq!(t.update(s, None).state, TrackState::Lost);
         assert!(t.update(s + 1, None).x.is_none());
+        // a measurement the next one disagrees with (another line) starts nothing
+        assert_eq!(
+            t.update(2 * s - 2, Some(&meas(0.2, 0.01))).state,
+            TrackState::Lost
+        );
+        assert_eq!(
+            t.update(2 * s - 1, Some(&meas(-0.2, 0.01))).state,
+            TrackState::Lost
+        );
         let r = t.update(2 * s, Some(&meas(-0.2, 0.01)));
         assert_eq!(r.state, TrackState::Reacquired);
         assert!((r.x.unwrap()[0] + 0.2).abs() < 1e-12);
@@ -429,6 +469,7 @@ mod tests {
             ..TrackerOptions::default()
         };
         let mut t = Tracker::new(o);
+        t.update(0, Some(&meas(0.0, 0.05)));
         t.update(1, Some(&meas(0.0, 0.05)));
         // heading +0.05: the rows run to the left of the nose, the robot moves right of them
         let r = t.update(1 + 200_000_000, None);
@@ -458,6 +499,9 @@ mod tests {
                 ..meas(0.05, 0.0)
             };
             let r = t.update(1 + i * dt, Some(&m));
+            if i == 0 {
+                continue;
+            }
             assert_eq!(r.state, TrackState::Tracking);
             last = r.x.unwrap()[2];
         }
