@@ -199,16 +199,10 @@ fn guidance(a: GuidanceArgs) -> anyhow::Result<ExitCode> {
 /// synthetic ground or each of `--photos` photographs' grounds.
 fn guidance_settings(a: &GuidanceArgs) -> anyhow::Result<Vec<eval::guidance::Setting>> {
     let calibration = match &a.calib {
-        Some(p) => {
-            let cal = Calibration::load(p)?;
-            Some(match a.scale {
-                None => cal,
-                Some(k) if k.is_finite() && k > 0.0 => cal
-                    .rescaled(1.0 / k)
-                    .map_err(|e| anyhow::anyhow!("--scale {k}: {e}"))?,
-                Some(k) => anyhow::bail!("--scale {k}: must be a positive factor (0.5: half)"),
-            })
-        }
+        Some(p) => Some(super::sim::scaled(
+            Calibration::load(p)?,
+            a.scale.unwrap_or(1.0),
+        )?),
         None => None,
     };
     if a.photo.images.is_none() {

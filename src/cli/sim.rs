@@ -167,17 +167,19 @@ fn calibration(a: &SimArgs) -> anyhow::Result<Calibration> {
         }
         (None, None) => bail!("give --calib FILE or --lens"),
     };
-    if !(a.scale.is_finite() && a.scale > 0.0) {
-        bail!(
-            "--scale {}: must be a positive factor (0.5: half resolution)",
-            a.scale
-        );
+    scaled(cal, a.scale)
+}
+
+/// `cal` at `k` times its resolution (`--scale K`: 0.5 is half), or an error naming `--scale`.
+pub(super) fn scaled(cal: Calibration, k: f64) -> anyhow::Result<Calibration> {
+    if !(k.is_finite() && k > 0.0) {
+        bail!("--scale {k}: must be a positive factor (0.5: half resolution)");
     }
-    if a.scale == 1.0 {
+    if k == 1.0 {
         return Ok(cal);
     }
-    cal.rescaled(1.0 / a.scale)
-        .map_err(|e| anyhow::anyhow!("--scale {}: {e}", a.scale))
+    cal.rescaled(1.0 / k)
+        .map_err(|e| anyhow::anyhow!("--scale {k}: {e}"))
 }
 
 /// The field's ground textured from the photograph `--images`/`--labels` choose.
