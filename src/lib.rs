@@ -6,6 +6,7 @@
 //! the unit sphere ([`sphere`]), the synthetic field with ground truth ([`synth`]), and the
 //! command-line front end ([`cli`]) that the thin binary calls.
 
+pub mod affinity;
 pub mod camera;
 pub mod check;
 pub mod cli;

@@ -83,17 +83,22 @@ pub struct Measurement {
 
 impl Measurement {
     /// The detector for `cal` with `detector` options, each frame's independent parts on
-    /// `threads` threads; `row_fit`: also fit the rows on the ground (for row guidance);
-    /// estimates below `min_quality` are `degraded`.
+    /// `threads` threads, pinned to cores from the `pin_from`-th allowed CPU on when given
+    /// ([`Detector::set_pinned_threads`]); `row_fit`: also fit the rows on the ground (for
+    /// row guidance); estimates below `min_quality` are `degraded`.
     pub fn new(
         cal: &Calibration,
         detector: DetectorOptions,
         threads: usize,
+        pin_from: Option<usize>,
         row_fit: bool,
         min_quality: f64,
     ) -> Result<Self, DetectError> {
         let mut d = Detector::new(cal, detector)?;
-        d.set_threads(threads)?;
+        match pin_from {
+            Some(first) => d.set_pinned_threads(threads, first)?,
+            None => d.set_threads(threads)?,
+        }
         Ok(Measurement {
             detector: d,
             row_fit: row_fit.then(|| RowFit::new(cal.mounting, RowFitOptions::default())),
@@ -232,6 +237,7 @@ impl Perception {
                 cal,
                 opts.detector.clone(),
                 opts.threads,
+                None,
                 opts.guidance.is_some(),
                 opts.min_quality,
             )?,

@@ -134,6 +134,9 @@ pub struct PipelineOptions {
     /// With row guidance: the tracker's prediction narrows the next frames' search (off by
     /// default: the answers then depend on timing, see docs/guidance.md).
     pub narrow_search: Option<NarrowSearch>,
+    /// Each detector thread pinned to its own core (`[pipeline] pin_threads`, on by
+    /// default; [`crate::detect::Detector::set_pinned_threads`]).
+    pub pin_threads: bool,
 }
 
 impl Default for PipelineOptions {
@@ -149,6 +152,7 @@ impl Default for PipelineOptions {
             poll_timeout: Duration::from_millis(50),
             guidance: None,
             narrow_search: None,
+            pin_threads: true,
         }
     }
 }
@@ -170,6 +174,7 @@ pub(crate) struct RawPipeline {
     record_queue: Raw<i64>,
     workers: Raw<i64>,
     threads: Raw<i64>,
+    pin_threads: Raw<bool>,
     min_quality: Raw<f64>,
     narrow_search: Raw<bool>,
     narrow_min_window_deg: Raw<f64>,
@@ -208,6 +213,7 @@ impl RawPipeline {
                 1.0,
             ),
             status_interval: Duration::from_secs_f64(status_interval_s),
+            pin_threads: c.get(&self.pin_threads, true),
             ..PipelineOptions::default()
         };
         let min_window_deg = c.range(

@@ -267,12 +267,13 @@ pub fn run(args: RunArgs, record_to: Option<PathBuf>) -> anyhow::Result<ExitCode
     // Detector workers.
     let opts = cfg.detector.clone();
     let mut processors: Vec<Box<dyn Processor>> = Vec::new();
-    for _ in 0..cfg.workers {
+    for w in 0..cfg.workers {
         processors.push(Box::new(
             Measurement::new(
                 &cal,
                 opts.clone(),
                 cfg.threads,
+                cfg.pipeline.pin_threads.then_some(w * cfg.threads),
                 cfg.guidance.is_some(),
                 cfg.pipeline.min_quality,
             )

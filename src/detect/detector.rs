@@ -113,12 +113,38 @@ impl Detector {
     /// after frame runs its loop on the threads themselves ([`Self::pool`]'s `install`):
     /// each frame then starts there without handing itself over, which allocates.
     pub fn set_threads(&mut self, threads: usize) -> Result<(), DetectError> {
+        self.build_pool(threads, None)
+    }
+
+    /// [`Self::set_threads`] with each thread pinned to its own core: thread `i` to the
+    /// process's allowed CPUs ([`crate::affinity::allowed_cpus`]) taken in turn from the
+    /// `first` on. A node runs its frames so (`[pipeline] pin_threads`): unpinned, a thread
+    /// woken after the idle gap between frames can land on its waker's core and the frame
+    /// then runs on one. A thread that cannot be pinned runs unpinned, with a warning.
+    pub fn set_pinned_threads(&mut self, threads: usize, first: usize) -> Result<(), DetectError> {
+        self.build_pool(threads, Some(first))
+    }
+
+    fn build_pool(&mut self, threads: usize, pin_from: Option<usize>) -> Result<(), DetectError> {
+        let allowed = crate::affinity::allowed_cpus();
         self.pool = match threads {
             0 | 1 => None,
             n => Some(Arc::new(
                 rayon::ThreadPoolBuilder::new()
                     .num_threads(n)
                     .thread_name(|i| format!("detector-{i}"))
+                    .start_handler(move |i| {
+                        let Some(first) = pin_from else { return };
+                        let Some(cpu) = crate::affinity::cpu_for(&allowed, first, i) else {
+                            tracing::warn!(
+                                "detector-{i}: the allowed CPUs could not be read; not pinned"
+                            );
+                            return;
+                        };
+                        if let Err(e) = crate::affinity::pin_current_thread(cpu) {
+                            tracing::warn!("detector-{i}: not pinned to CPU {cpu}: {e}");
+                        }
+                    })
                     .build()
                     .map_err(|e| DetectError::Buffer(format!("{n} detector threads: {e}")))?,
             )),
@@ -376,6 +402,31 @@ mod tests {
         let mut out = Detection::default();
         let e = d.process(&v, &mut out).unwrap_err().to_string();
         assert!(e.contains("not the calibration"), "{e}");
+    }
+
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn pinned_threads_each_keep_one_cpu_in_turn() {
+        let allowed = crate::affinity::allowed_cpus();
+        let cal = ideal_fisheye(100, 120).unwrap();
+        let mut d = Detector::new(&cal, DetectorOptions::default()).unwrap();
+        d.set_pinned_threads(2, 1).unwrap();
+        let mut got = d
+            .pool()
+            .unwrap()
+            .broadcast(|b| (b.index(), crate::affinity::current_thread_cpus()));
+        got.sort();
+        let want: Vec<_> = (0..2)
+            .map(|i| (i, vec![crate::affinity::cpu_for(&allowed, 1, i).unwrap()]))
+            .collect();
+        assert_eq!(got, want);
+        // unpinned threads keep the process's CPUs
+        d.set_threads(2).unwrap();
+        let got = d
+            .pool()
+            .unwrap()
+            .broadcast(|_| crate::affinity::current_thread_cpus());
+        assert_eq!(got, vec![allowed.clone(), allowed]);
     }
 
     #[test]

@@ -94,7 +94,7 @@ impl McapReplay {
         self.image_channel = None;
         self.truth_channel = None;
         self.truths.clear();
-        self.pacer.reset();
+        self.pacer.next_pass();
         self.frames_this_pass = 0;
         Ok(())
     }

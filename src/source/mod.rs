@@ -112,21 +112,44 @@ pub enum Rate {
 }
 
 /// Paces replayed frames: a frame recorded at time `t` is due at wall time
-/// `start + (t - t0) / speed`.
+/// `start + (t - t0) / speed`. A looping replay's next pass starts one recorded frame
+/// interval after the last frame of the pass before ([`Pacer::next_pass`]), so that the
+/// frame rate holds across the seam.
 #[derive(Debug, Clone)]
 pub struct Pacer {
     rate: Rate,
     base: Option<(Instant, u64)>,
+    /// The last frame's recorded time and due time.
+    last: Option<(u64, Instant)>,
+    /// The last interval between two frames, recorded nanoseconds.
+    interval_ns: u64,
+    /// When the next pass's first frame is due.
+    carry: Option<Instant>,
 }
 
 impl Pacer {
     pub fn new(rate: Rate) -> Self {
-        Pacer { rate, base: None }
+        Pacer {
+            rate,
+            base: None,
+            last: None,
+            interval_ns: 0,
+            carry: None,
+        }
     }
 
-    /// Restarts the clock (e.g. when a replay loops).
-    pub fn reset(&mut self) {
+    /// Restarts the clock at the next frame: the next pass of a looping replay, whose
+    /// first frame is due one recorded frame interval after the last one of this pass.
+    pub fn next_pass(&mut self) {
         self.base = None;
+        let speed = match self.rate {
+            Rate::Recorded(s) => s,
+            Rate::Max => return,
+        };
+        self.carry = self
+            .last
+            .take()
+            .map(|(_, due)| due + Duration::from_secs_f64(self.interval_ns as f64 / 1e9 / speed));
     }
 
     /// How long until the frame recorded at `t_ns` is due (zero if due now).
@@ -134,14 +157,24 @@ impl Pacer {
         let Rate::Recorded(speed) = self.rate else {
             return Duration::ZERO;
         };
-        let (start, t0) = *self.base.get_or_insert((Instant::now(), t_ns));
+        let now = Instant::now();
+        let (start, t0) = *self
+            .base
+            .get_or_insert((self.carry.take().unwrap_or(now), t_ns));
         // Time going backwards in a recording: play the frame at once and rebase.
         if t_ns < t0 {
-            self.base = Some((Instant::now(), t_ns));
+            self.base = Some((now, t_ns));
+            self.last = Some((t_ns, now));
             return Duration::ZERO;
         }
         let due = start + Duration::from_secs_f64((t_ns - t0) as f64 / 1e9 / speed);
-        due.saturating_duration_since(Instant::now())
+        if let Some((t_last, _)) = self.last {
+            if t_ns > t_last {
+                self.interval_ns = t_ns - t_last;
+            }
+        }
+        self.last = Some((t_ns, due));
+        due.saturating_duration_since(now)
     }
 }
 
@@ -175,5 +208,32 @@ mod tests {
         );
         // Backwards time rebases instead of waiting.
         assert_eq!(p.wait_for(10), Duration::ZERO);
+    }
+
+    #[test]
+    fn a_looping_replay_keeps_its_frame_rate_across_the_seam() {
+        let ms = |m: u64| m * 1_000_000;
+        let mut p = Pacer::new(Rate::Recorded(1.0));
+        // one pass of three frames 40 ms apart, each played when due
+        for t in [100, 140, 180] {
+            std::thread::sleep(p.wait_for(ms(t)));
+        }
+        p.next_pass();
+        let w = p.wait_for(ms(100));
+        assert!(
+            w > Duration::from_millis(30) && w <= Duration::from_millis(40),
+            "the next pass's first frame is due one interval on: {w:?}"
+        );
+        std::thread::sleep(w);
+        let w = p.wait_for(ms(140));
+        assert!(
+            w > Duration::from_millis(30) && w <= Duration::from_millis(40),
+            "{w:?}"
+        );
+        // as fast as possible: nothing waits
+        let mut p = Pacer::new(Rate::Max);
+        p.wait_for(ms(100));
+        p.next_pass();
+        assert_eq!(p.wait_for(ms(100)), Duration::ZERO);
     }
 }
