@@ -176,7 +176,7 @@ fn table2_outcomes_reproduce_with_synth_and_detect() {
             "--seed",
             &seed,
             "--scale",
-            "2",
+            "0.5",
             "--out",
             png.to_str().unwrap(),
             "--truth",

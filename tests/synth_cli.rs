@@ -24,7 +24,7 @@ fn writes_png_and_truth() {
         let png = dir.join(format!("{lens}_{style}.png"));
         let json = dir.join(format!("{lens}_{style}.json"));
         let out = bin()
-            .args(["synth", "--lens", lens, "--style", style, "--scale", "2"])
+            .args(["synth", "--lens", lens, "--style", style, "--scale", "0.5"])
             .args([
                 "--seed",
                 "7",
@@ -80,7 +80,7 @@ fn same_seed_same_image_and_random_protocols() {
         let png = dir.join(format!("{name}.png"));
         let json = dir.join(format!("{name}.json"));
         let out = bin()
-            .args(["synth", "--scale", "2", "--seed", "3"])
+            .args(["synth", "--scale", "0.5", "--seed", "3"])
             .args(extra)
             .arg("--out")
             .arg(&png)
@@ -160,7 +160,8 @@ fn bad_arguments_fail_clearly() {
     let cases: &[(&[&str], &str)] = &[
         (&["--noise", "2"], "noise"),
         (&["--height-m", "0"], "height_m"),
-        (&["--scale", "7"], "scale"),
+        (&["--scale", "0.3"], "scale"),
+        (&["--scale", "0"], "--scale 0: must be a positive factor"),
         (&["--style", "sepia"], "sepia"),
         (
             &["--calib", "/nonexistent/calib.txt"],

@@ -39,7 +39,7 @@ pub struct EvalArgs {
     /// ideal 185° fisheye and panoramic annular lens for the GC2450C.
     #[arg(long = "lens")]
     pub lenses: Vec<PathBuf>,
-    /// Resolution divisor: 1 full, 2 half (default 1; 2 with --quick).
+    /// Resolution factor: 1 full, 0.5 half (default 1; 0.5 with --quick).
     #[arg(long)]
     pub scale: Option<f64>,
     /// Score the detector with the `[detector]` options of this node configuration (the
@@ -280,8 +280,12 @@ pub fn run(a: EvalArgs) -> anyhow::Result<ExitCode> {
         opts.distance_images = n;
     }
     if let Some(s) = a.scale {
-        anyhow::ensure!(s.is_finite() && s > 0.0, "--scale {s} must be positive");
-        opts.scale = s;
+        anyhow::ensure!(
+            s.is_finite() && s > 0.0,
+            "--scale {s}: must be a positive factor (0.5: half resolution)"
+        );
+        // the evaluation divides the calibration's resolution by its `scale`
+        opts.scale = 1.0 / s;
     }
     opts.methods = a.methods;
     let tty = std::io::stderr().is_terminal();

@@ -77,8 +77,8 @@ pub struct SynthArgs {
     /// Image style.
     #[arg(long, value_enum)]
     style: Option<StyleArg>,
-    /// Render at 1/F of the calibration's resolution (e.g. 2 for half), through the
-    /// rescaled calibration.
+    /// Render at K times the calibration's resolution (0.5: half), through the rescaled
+    /// calibration.
     #[arg(long, default_value_t = 1.0)]
     scale: f64,
     /// Output image (PNG; the Bayer style is written as a one-channel PNG of the mosaic).
@@ -137,12 +137,7 @@ pub fn run(args: SynthArgs) -> anyhow::Result<ExitCode> {
             (cal, lens.name().to_string())
         }
     };
-    let cal = if args.scale != 1.0 {
-        cal.rescaled(args.scale)
-            .map_err(|e| anyhow::anyhow!("--scale {}: {e}", args.scale))?
-    } else {
-        cal
-    };
+    let cal = super::sim::scaled(cal, args.scale)?;
     let mut opts = match args.random {
         Some(ProtocolArg::Table1) => random_scene(args.seed, Protocol::Table1),
         Some(ProtocolArg::Table2) => random_scene(args.seed, Protocol::Table2),

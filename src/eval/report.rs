@@ -242,7 +242,7 @@ fn table2_bounds(r: &EvalResults, s: &mut String) {
     }
     let _ = writeln!(
         s,
-        "\nEvery image is in outcomes.jsonl with its seed, noise and weeds; `omnirow synth --lens LENS --random table2 --seed SEED --out image.png --truth truth.json` renders a Table II image again (`--calib FILE` for a calibration file, `--scale F` if the run used one; `--random table1` for Table I)."
+        "\nEvery image is in outcomes.jsonl with its seed, noise and weeds; `omnirow synth --lens LENS --random table2 --seed SEED --out image.png --truth truth.json` renders a Table II image again (`--calib FILE` for a calibration file, `--scale K` if the run used one; `--random table1` for Table I)."
     );
 }
 
