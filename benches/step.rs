@@ -18,10 +18,10 @@ use std::time::Duration;
 /// 15 frames: the tracker sees the robot move).
 fn frames() -> (SyntheticDrive, Vec<Frame>) {
     let text = "[source.synthetic]\nwidth = 2448\nheight = 2050\nfps = 15.0\n";
-    let SourceConfig::Synthetic(opts) = Config::parse(text, "bench.toml").unwrap().source else {
+    let SourceConfig::Synthetic(s) = Config::parse(text, "bench.toml").unwrap().source else {
         unreachable!("a synthetic source")
     };
-    let mut drive = SyntheticDrive::new(opts).unwrap();
+    let mut drive = SyntheticDrive::new(s.drive).unwrap();
     let frames = (0..8).map(|seq| drive.frame_at(seq).unwrap()).collect();
     (drive, frames)
 }

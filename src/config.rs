@@ -472,6 +472,77 @@ mod tests {
     }
 
     #[test]
+    fn a_photographs_ground_takes_both_keys_and_its_options() {
+        let cfg = Config::parse(
+            "[source.synthetic]\nphoto = \"f/3.jpg\"\nphoto_labels = \"f/label\"\nphoto_focal_px = 300.0\nphoto_band_spacings = 3\n",
+            "t.toml",
+        )
+        .unwrap();
+        let SourceConfig::Synthetic(s) = cfg.source else {
+            panic!("the synthetic source")
+        };
+        let p = s.photo.expect("the photograph");
+        assert_eq!(p.image, std::path::PathBuf::from("f/3.jpg"));
+        assert_eq!(p.labels, std::path::PathBuf::from("f/label"));
+        assert_eq!(p.options.rectify.focal_px, Some(300.0));
+        assert_eq!(p.options.max_band_spacings, 3);
+        // the defaults of `omnirow synth --images`
+        assert_eq!(p.options.max_sampling_m, 0.02);
+        assert_eq!(p.options.rectify.row_spacing_m, 0.5);
+        assert!(!s.size_given);
+        let SourceConfig::Synthetic(s) = Config::default().source else {
+            panic!("the synthetic source")
+        };
+        assert_eq!(s.photo, None);
+    }
+
+    #[test]
+    fn a_photograph_without_its_labels_or_of_a_wrong_type_is_named() {
+        let e = err("[source.synthetic]\nfps = 10.0\nphoto = \"f/3.jpg\"\n");
+        assert_eq!(
+            (e.problems[0].line, e.problems[0].key.as_str()),
+            (3, "source.synthetic.photo"),
+            "{e}"
+        );
+        assert!(e.problems[0].message.contains("photo_labels"), "{e}");
+        let e = err("[source.synthetic]\nphoto_labels = \"f/label\"\n");
+        assert_eq!(e.problems[0].key, "source.synthetic.photo_labels", "{e}");
+        assert!(
+            e.problems[0].message.contains("source.synthetic.photo"),
+            "{e}"
+        );
+        let e = err("[source.synthetic]\nphoto = 3\nphoto_labels = \"l\"\n");
+        assert_eq!(
+            (e.problems[0].line, e.problems[0].key.as_str()),
+            (2, "source.synthetic.photo"),
+            "{e}"
+        );
+        assert!(e.problems[0].message.contains("invalid type"), "{e}");
+        let e = err("[source.synthetic]\nphoto = \"a.jpg\"\nphoto_labels = \"l\"\nphoto_band_spacings = 0\nphoto_focal_px = -5.0\n");
+        let keys: Vec<&str> = e.problems.iter().map(|p| p.key.as_str()).collect();
+        assert_eq!(
+            keys,
+            [
+                "source.synthetic.photo_band_spacings",
+                "source.synthetic.photo_focal_px"
+            ],
+            "{e}"
+        );
+        // an option without the photograph, and a drive the photograph cannot show
+        let e = err("[source.synthetic]\nphoto_focal_px = 300.0\n");
+        assert_eq!(e.problems[0].key, "source.synthetic.photo_focal_px", "{e}");
+        let e = err(
+            "[source.synthetic]\ncurvature_per_m = 0.05\nphoto = \"a.jpg\"\nphoto_labels = \"l\"\n",
+        );
+        assert_eq!(
+            (e.problems[0].line, e.problems[0].key.as_str()),
+            (3, "source.synthetic.photo"),
+            "{e}"
+        );
+        assert!(e.problems[0].message.contains("curvature_per_m"), "{e}");
+    }
+
+    #[test]
     fn impossible_values_all_reported() {
         let e = err("[pipeline]\nframe_queue = 0\nworkers = 99\nthreads = 0\n[publish]\nudp = [\"127.0.0.1:7447\", \"nowhere\"]\n[source.synthetic]\nwidth = 33\n");
         let keys: Vec<(usize, &str)> = e

@@ -23,7 +23,7 @@ use crate::publish::Publisher;
 use crate::record::Recorder;
 use crate::source::folder::{FolderOptions, FolderReplay};
 use crate::source::mcap_replay::{McapReplay, McapReplayOptions};
-use crate::source::synthetic::SyntheticDrive;
+use crate::source::synthetic::{SyntheticConfig, SyntheticDrive};
 use crate::source::{CalibrationChoice, Rate, ReplayConfig, Source, SourceConfig, SourceState};
 use crate::status::Latest;
 use anyhow::{bail, Context};
@@ -71,7 +71,8 @@ pub struct RunArgs {
     /// HTTP listen address, or `off`.
     #[arg(long, value_name = "ADDR:PORT")]
     pub http: Option<String>,
-    /// Calibration: `ideal:fisheye185`, `ideal:pal`, or a file.
+    /// Calibration: `ideal:fisheye185`, `ideal:pal`, or a file (the synthetic drive renders
+    /// through it).
     #[arg(long, value_name = "CALIB")]
     pub calib: Option<String>,
     /// Detector worker threads.
@@ -183,6 +184,84 @@ fn camera_source(_: &crate::gige::GigeConfig) -> anyhow::Result<Box<dyn Source>>
     )
 }
 
+/// The synthetic drive of `[source.synthetic]`, rendered through `[camera] calibration`: a
+/// file at its own size, or rescaled to the drive's `width`×`height` when they are written;
+/// an ideal lens at the drive's size; `auto`, the drive's `lens`. Over its photograph's
+/// ground when it names one (read now: an unreadable or unfit photograph is an error before
+/// anything starts).
+fn synthetic_source(
+    s: &SyntheticConfig,
+    choice: &CalibrationChoice,
+) -> anyhow::Result<SyntheticDrive> {
+    let mut opts = s.drive.clone();
+    let drive = match choice {
+        CalibrationChoice::File(p) => {
+            let cal = Calibration::load(p)
+                .with_context(|| format!("camera.calibration {}", p.display()))?;
+            let cal = if s.size_given {
+                let (h, w) = (opts.height, opts.width);
+                cal.rescaled_to(h, w).map_err(|e| {
+                    anyhow::anyhow!(
+                        "source.synthetic.width = {w}, height = {h} through camera.calibration {}: \
+                         {e}; without both keys the drive renders at the calibration's size",
+                        p.display()
+                    )
+                })?
+            } else {
+                cal
+            };
+            SyntheticDrive::through(opts, cal)
+        }
+        CalibrationChoice::Ideal(lens) => {
+            opts.lens = *lens;
+            SyntheticDrive::new(opts)
+        }
+        CalibrationChoice::Auto => SyntheticDrive::new(opts),
+    }
+    .context("synthetic drive")?;
+    let Some(photo) = &s.photo else {
+        return Ok(drive);
+    };
+    let ground =
+        super::synth::photo::ground_of_photograph(&photo.image, &photo.labels, &photo.options)
+            .context("source.synthetic.photo")?;
+    drive.with_photo_ground(Arc::new(ground)).with_context(|| {
+        format!(
+            "source.synthetic.photo: the ground of {}",
+            photo.image.display()
+        )
+    })
+}
+
+/// The calibration the detector uses: the synthetic drive's own (it renders through the
+/// configured one), else `[camera] calibration`, else the source's (a recording's), else the
+/// ideal fisheye at the frames' size.
+fn detector_calibration(cfg: &Config, source: &dyn Source) -> anyhow::Result<Calibration> {
+    if let (SourceConfig::Synthetic(_), Some(c)) = (&cfg.source, source.calibration()) {
+        return Ok(c.clone());
+    }
+    Ok(match &cfg.calibration {
+        CalibrationChoice::File(p) => Calibration::load(p)?,
+        CalibrationChoice::Ideal(l) => l.calibration(2050, 2448)?,
+        CalibrationChoice::Auto => match source.calibration() {
+            Some(c) => c.clone(),
+            None => {
+                // A camera's region of interest sets the frame size; otherwise the GC2450C's.
+                let (h, w) = match &cfg.source {
+                    SourceConfig::Camera(g) => g.roi.map_or((2050, 2448), |r| (r.height, r.width)),
+                    _ => (2050, 2448),
+                };
+                tracing::warn!("no calibration configured or recorded: using the ideal 185° fisheye at {w}x{h} (camera.calibration)");
+                IdealLens::Fisheye185.calibration(h, w).map_err(|e| {
+                    anyhow::anyhow!(
+                        "camera.calibration: no calibration for the {w}x{h} frames: {e}"
+                    )
+                })?
+            }
+        },
+    })
+}
+
 /// Each stage's time ([`crate::estimate::STAGES`]) as one line: `prepare 3.10, rows ...`.
 fn stage_line(ms: &[f64; 4]) -> String {
     let parts: Vec<String> = crate::estimate::STAGES
@@ -206,9 +285,7 @@ pub fn run(args: RunArgs, record_to: Option<PathBuf>) -> anyhow::Result<ExitCode
 
     // Source (opened now, so a missing file is an error before anything starts).
     let source: Box<dyn Source> = match &cfg.source {
-        SourceConfig::Synthetic(s) => {
-            Box::new(SyntheticDrive::new(s.clone()).context("synthetic drive")?)
-        }
+        SourceConfig::Synthetic(s) => Box::new(synthetic_source(s, &cfg.calibration)?),
         SourceConfig::Replay(r) if r.path.is_dir() => {
             Box::new(FolderReplay::open(FolderOptions {
                 dir: r.path.clone(),
@@ -225,26 +302,7 @@ pub fn run(args: RunArgs, record_to: Option<PathBuf>) -> anyhow::Result<ExitCode
         })?),
         SourceConfig::Camera(g) => camera_source(g)?,
     };
-    let cal = match &cfg.calibration {
-        CalibrationChoice::File(p) => Calibration::load(p)?,
-        CalibrationChoice::Ideal(l) => l.calibration(2050, 2448)?,
-        CalibrationChoice::Auto => match source.calibration() {
-            Some(c) => c.clone(),
-            None => {
-                // A camera's region of interest sets the frame size; otherwise the GC2450C's.
-                let (h, w) = match &cfg.source {
-                    SourceConfig::Camera(g) => g.roi.map_or((2050, 2448), |r| (r.height, r.width)),
-                    _ => (2050, 2448),
-                };
-                tracing::warn!("no calibration configured or recorded: using the ideal 185° fisheye at {w}x{h} (camera.calibration)");
-                IdealLens::Fisheye185.calibration(h, w).map_err(|e| {
-                    anyhow::anyhow!(
-                        "camera.calibration: no calibration for the {w}x{h} frames: {e}"
-                    )
-                })?
-            }
-        },
-    };
+    let cal = detector_calibration(&cfg, source.as_ref())?;
     if let Some(rec) = cfg.record.as_mut() {
         rec.calibration_toml = Some(cal.to_toml());
         rec.annotate = Some(cal.clone());

@@ -6,7 +6,7 @@
 //! drive's own keys (`[source.synthetic]`) are checked in [`super::synthetic`], the camera's
 //! (`[gige]`) in [`crate::gige`].
 
-use super::synthetic::{RawSynthetic, SyntheticDriveOptions};
+use super::synthetic::{RawSynthetic, SyntheticConfig};
 use super::Rate;
 use crate::camera::IdealLens;
 use crate::check::{Check, Raw};
@@ -18,8 +18,9 @@ use std::time::Duration;
 /// Where frames come from.
 #[derive(Debug, Clone, PartialEq)]
 pub enum SourceConfig {
-    /// The synthetic drive (`[source.synthetic]`).
-    Synthetic(SyntheticDriveOptions),
+    /// The synthetic drive (`[source.synthetic]`), through `[camera] calibration` when it
+    /// names a file or an ideal lens.
+    Synthetic(SyntheticConfig),
     Replay(ReplayConfig),
     /// A GigE Vision camera through Aravis, configured by `[gige]` (needs the `camera`
     /// feature at run time; the configuration is checked on every build).

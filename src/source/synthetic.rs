@@ -8,18 +8,22 @@
 //! live. The frames go through an ideal lens of the options' size, or through a given
 //! calibration ([`SyntheticDrive::through`]); the ground can be a photograph's
 //! ([`SyntheticDrive::with_photo_ground`]: real plants, straight rows). Frames are due at `start + i / fps`; a renderer slower than that delivers late
-//! frames rather than skipping any.
+//! frames rather than skipping any. Also owns `[source.synthetic]`'s keys and checks
+//! ([`SyntheticConfig`]): the drive's, and the photograph's paths and options
+//! ([`PhotoSource`]), which the node reads when it starts.
 
 use super::{Poll, Source, SourceError, SourceState};
 use crate::camera::{Calibration, IdealLens};
 use crate::check::{Check, Raw};
 use crate::frame::{now_ns, Frame};
-use crate::synth::photo::PhotoGround;
+use crate::synth::photo::{PhotoGround, PhotoOptions};
 use crate::synth::{GroundTruth, Renderer, Scene, Style, SynthError, SynthOptions};
 use serde::Deserialize;
 use std::f64::consts::TAU;
+use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
+use toml::Spanned;
 
 /// Settings of the drive: `[source.synthetic]` of the node's configuration.
 #[derive(Debug, Clone, PartialEq)]
@@ -77,11 +81,172 @@ pub(crate) struct RawSynthetic {
     rows_end_m: Raw<f64>,
     gap_start_m: Raw<f64>,
     gap_length_m: Raw<f64>,
+    photo: Raw<String>,
+    photo_labels: Raw<String>,
+    photo_focal_px: Raw<f64>,
+    photo_band_spacings: Raw<usize>,
+    photo_max_sampling_m: Raw<f64>,
+    photo_row_spacing_m: Raw<f64>,
+}
+
+/// `[source.synthetic]`, checked: the drive, whether its size was written, and the
+/// photograph whose ground it drives over.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SyntheticConfig {
+    pub drive: SyntheticDriveOptions,
+    /// `width` or `height` was written: through a calibration file (`[camera] calibration`)
+    /// the frames are then the calibration rescaled to that size, else the calibration's own.
+    pub size_given: bool,
+    pub photo: Option<PhotoSource>,
+}
+
+/// A labelled perspective photograph whose ground the drive renders (`photo`,
+/// `photo_labels` and the `photo_*` options). It is read when the node starts.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PhotoSource {
+    pub image: PathBuf,
+    /// The folder of its label: NAME.json polylines or a mask image NAME.png/.jpg.
+    pub labels: PathBuf,
+    pub options: PhotoOptions,
 }
 
 impl RawSynthetic {
-    /// Checks `[source.synthetic]` into the drive's options.
-    pub(crate) fn validate(self, c: &mut Check) -> SyntheticDriveOptions {
+    /// Checks `[source.synthetic]`: the drive's options and the photograph's.
+    pub(crate) fn validate(self, c: &mut Check) -> SyntheticConfig {
+        let size_given = self.width.is_some() || self.height.is_some();
+        let drive = self.drive(c);
+        let photo = self.photo(c);
+        if let (Some(_), Some(p)) = (&photo, &self.photo) {
+            for (key, set) in [
+                ("curvature_per_m", drive.curvature_per_m != 0.0),
+                ("rows_end_m", drive.rows_end_m > 0.0),
+                ("gap_length_m", drive.gap_length_m > 0.0),
+            ] {
+                if set {
+                    c.bad(
+                        "source.synthetic.photo",
+                        p,
+                        format!("a photograph's ground has straight rows without an end or an empty stretch: remove source.synthetic.{key} or the photograph"),
+                    );
+                }
+            }
+        }
+        SyntheticConfig {
+            drive,
+            size_given,
+            photo,
+        }
+    }
+
+    /// The photograph's keys: `photo` and `photo_labels` both or neither; the options only
+    /// with them.
+    fn photo(&self, c: &mut Check) -> Option<PhotoSource> {
+        let path = |c: &mut Check, key: &str, v: &Spanned<String>| {
+            if v.get_ref().is_empty() {
+                c.bad(key, v, "must name a file or folder");
+            }
+            PathBuf::from(v.get_ref())
+        };
+        let (image, labels) = match (&self.photo, &self.photo_labels) {
+            (Some(i), Some(l)) => (
+                path(c, "source.synthetic.photo", i),
+                path(c, "source.synthetic.photo_labels", l),
+            ),
+            (Some(i), None) => {
+                c.bad(
+                    "source.synthetic.photo",
+                    i,
+                    "needs source.synthetic.photo_labels (the folder of its label: NAME.json polylines or a mask NAME.png/.jpg)",
+                );
+                return None;
+            }
+            (None, Some(l)) => {
+                c.bad(
+                    "source.synthetic.photo_labels",
+                    l,
+                    "needs source.synthetic.photo (the photograph it labels)",
+                );
+                return None;
+            }
+            (None, None) => {
+                self.photo_options_without_photo(c);
+                return None;
+            }
+        };
+        let d = PhotoOptions::default();
+        let mut options = PhotoOptions {
+            max_sampling_m: c.range(
+                "source.synthetic.photo_max_sampling_m",
+                &self.photo_max_sampling_m,
+                d.max_sampling_m,
+                0.001,
+                1.0,
+            ),
+            max_band_spacings: c.range(
+                "source.synthetic.photo_band_spacings",
+                &self.photo_band_spacings,
+                d.max_band_spacings,
+                1,
+                20,
+            ),
+            ..d
+        };
+        options.rectify.row_spacing_m = c.range(
+            "source.synthetic.photo_row_spacing_m",
+            &self.photo_row_spacing_m,
+            options.rectify.row_spacing_m,
+            0.05,
+            5.0,
+        );
+        options.rectify.focal_px = self.photo_focal_px.as_ref().map(|_| {
+            c.range(
+                "source.synthetic.photo_focal_px",
+                &self.photo_focal_px,
+                1000.0,
+                1.0,
+                100_000.0,
+            )
+        });
+        Some(PhotoSource {
+            image,
+            labels,
+            options,
+        })
+    }
+
+    /// A photograph's option written without a photograph is a mistake worth naming.
+    fn photo_options_without_photo(&self, c: &mut Check) {
+        let spans = [
+            (
+                "photo_focal_px",
+                self.photo_focal_px.as_ref().map(Spanned::span),
+            ),
+            (
+                "photo_band_spacings",
+                self.photo_band_spacings.as_ref().map(Spanned::span),
+            ),
+            (
+                "photo_max_sampling_m",
+                self.photo_max_sampling_m.as_ref().map(Spanned::span),
+            ),
+            (
+                "photo_row_spacing_m",
+                self.photo_row_spacing_m.as_ref().map(Spanned::span),
+            ),
+        ];
+        for (key, span) in spans {
+            if let Some(s) = span {
+                c.bad_at(
+                    format!("source.synthetic.{key}"),
+                    Some(s.start),
+                    "applies to a photograph's ground: set source.synthetic.photo and photo_labels too".into(),
+                );
+            }
+        }
+    }
+
+    /// The drive's own keys.
+    fn drive(&self, c: &mut Check) -> SyntheticDriveOptions {
         let width = c.range("source.synthetic.width", &self.width, 612, 32, 8192);
         let height = c.range("source.synthetic.height", &self.height, 512, 32, 8192);
         for (k, v, x) in [

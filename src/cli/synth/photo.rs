@@ -106,6 +106,24 @@ fn ground_of(image: &Path, label_dir: &Path, opts: &PhotoOptions) -> Result<Phot
     PhotoGround::new(&photo, &rows, opts).map_err(Refusal::Rejected)
 }
 
+/// The ground of one photograph `image`, its label in `label_dir` (the node's
+/// `[source.synthetic] photo`): an error names the photograph and why it cannot serve.
+pub fn ground_of_photograph(
+    image: &Path,
+    label_dir: &Path,
+    opts: &PhotoOptions,
+) -> anyhow::Result<PhotoGround> {
+    let name = image.display().to_string();
+    if let Err(e) = std::fs::metadata(image) {
+        bail!("{name}: cannot read the photograph: {e}");
+    }
+    ground_of(image, label_dir, opts).map_err(|e| match e {
+        Refusal::Unreadable(why) if why.starts_with(&name) => anyhow::anyhow!(why),
+        Refusal::Unreadable(why) => anyhow::anyhow!("{name}: {why}"),
+        Refusal::Rejected(r) => anyhow::anyhow!("{name}: rejected ({}): {r}", r.kind()),
+    })
+}
+
 /// The photograph's ground: the one at `--photo-index`, else the first that fits from
 /// position `seed` mod count on. The error lists the photographs rejected and why.
 pub fn choose(
