@@ -154,10 +154,14 @@ impl Pacer {
 
     /// How long until the frame recorded at `t_ns` is due (zero if due now).
     pub fn wait_for(&mut self, t_ns: u64) -> Duration {
+        self.wait_at(t_ns, Instant::now())
+    }
+
+    /// [`Self::wait_for`] with the clock read as `now`.
+    fn wait_at(&mut self, t_ns: u64, now: Instant) -> Duration {
         let Rate::Recorded(speed) = self.rate else {
             return Duration::ZERO;
         };
-        let now = Instant::now();
         let (start, t0) = *self
             .base
             .get_or_insert((self.carry.take().unwrap_or(now), t_ns));
@@ -213,27 +217,23 @@ mod tests {
     #[test]
     fn a_looping_replay_keeps_its_frame_rate_across_the_seam() {
         let ms = |m: u64| m * 1_000_000;
+        let t0 = Instant::now();
+        let at = |m: u64| t0 + Duration::from_millis(m);
         let mut p = Pacer::new(Rate::Recorded(1.0));
-        // one pass of three frames 40 ms apart, each played when due
-        for t in [100, 140, 180] {
-            std::thread::sleep(p.wait_for(ms(t)));
-        }
+        // one pass of three frames 40 ms apart, each played when due: at 0, 40 and 80 ms
+        assert_eq!(p.wait_at(ms(100), at(0)), Duration::ZERO);
+        assert_eq!(p.wait_at(ms(140), at(0)), Duration::from_millis(40));
+        assert_eq!(p.wait_at(ms(180), at(40)), Duration::from_millis(40));
+        // the next pass read at once: its first frame is due one interval after the last
         p.next_pass();
-        let w = p.wait_for(ms(100));
-        assert!(
-            w > Duration::from_millis(30) && w <= Duration::from_millis(40),
-            "the next pass's first frame is due one interval on: {w:?}"
-        );
-        std::thread::sleep(w);
-        let w = p.wait_for(ms(140));
-        assert!(
-            w > Duration::from_millis(30) && w <= Duration::from_millis(40),
-            "{w:?}"
-        );
+        assert_eq!(p.wait_at(ms(100), at(80)), Duration::from_millis(40));
+        assert_eq!(p.wait_at(ms(140), at(120)), Duration::from_millis(40));
+        // read late, a frame is due at once
+        assert_eq!(p.wait_at(ms(180), at(500)), Duration::ZERO);
         // as fast as possible: nothing waits
         let mut p = Pacer::new(Rate::Max);
-        p.wait_for(ms(100));
+        p.wait_at(ms(100), at(0));
         p.next_pass();
-        assert_eq!(p.wait_for(ms(100)), Duration::ZERO);
+        assert_eq!(p.wait_at(ms(100), at(0)), Duration::ZERO);
     }
 }
