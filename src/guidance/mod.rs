@@ -64,7 +64,8 @@ pub struct GuidanceOptions {
     /// followed line is published (a tool, or the base_link origin).
     pub tool_point_m: [f64; 2],
     /// Estimate the roll about the rows from the comb (needs two rows on each side and five
-    /// in all); 0 turns it off. Degrees, the largest roll searched.
+    /// in all), searching up to this many degrees; 0 (the default) leaves it off: one
+    /// frame's comb of real plants suggests rolls that are not there.
     pub max_roll_deg: f64,
     /// Fewest rows on the comb for a measurement.
     pub min_rows: usize,
@@ -90,7 +91,7 @@ impl Default for GuidanceOptions {
             min_spacing_m: 0.2,
             max_spacing_m: 2.0,
             tool_point_m: [0.0, 0.0],
-            max_roll_deg: 5.0,
+            max_roll_deg: 0.0,
             min_rows: 2,
             row_sd_m: 0.003,
             heading_sd_rad: 0.1f64.to_radians(),
@@ -805,7 +806,11 @@ mod tests {
     #[test]
     fn roll_estimated_and_offset_kept() {
         let roll = 1.5f64.to_radians();
-        let mut g = Guidance::new(GuidanceOptions::default(), Mounting::default()).unwrap();
+        let searched = GuidanceOptions {
+            max_roll_deg: 5.0,
+            ..GuidanceOptions::default()
+        };
+        let mut g = Guidance::new(searched, Mounting::default()).unwrap();
         let (vp, normals) = view(0.0, 0.0, roll, 0.3, 1.0, 0.5, -5..=5);
         let mut out = GuidanceEstimate::default();
         g.update(1, Some(vp), normals, None, &mut out);
