@@ -183,6 +183,15 @@ pub struct FrameScore {
     /// The truth's and the published heading relative to the rows (radians).
     pub truth_heading_rad: f64,
     pub heading_rad: Option<f64>,
+    /// The tracker's state after this frame.
+    pub tracking: crate::guidance::TrackState,
+    /// True when the tracker rejected this frame's measurement.
+    pub rejected: bool,
+    /// This frame's own answer before the filter (`None`: the frame measured nothing).
+    pub measured: Option<crate::guidance::FrameGuidance>,
+    /// The detector's status and quality (0–1) of this frame's estimate.
+    pub status: crate::estimate::Status,
+    pub quality: f64,
 }
 
 /// The p-quantile of `v` (sorted in place), 0 when empty.
@@ -246,6 +255,11 @@ pub fn run_drive(
             offset_m: g.lateral_offset_m,
             truth_heading_rad: t.heading_rad,
             heading_rad: g.heading_rad,
+            tracking: g.tracking,
+            rejected: g.rejected,
+            measured: g.frame,
+            status: est.status,
+            quality: est.quality,
         });
         let own = est.row_fit.as_ref();
         tracing::trace!(
