@@ -48,65 +48,14 @@ fn synthetic_drive_publishes_udp_estimates_matching_truth() {
 fn record_replay_twice_identical_and_truncated_replay() {
     let dir = tmpdir("replay");
     let cfg = small_config(&dir, "");
-    let rec_dir = dir.join("rec");
-    let out = bin()
-        .args(["record", "--out"])
-        .arg(&rec_dir)
-        .args(["--frames", "12", "--no-print", "--config"])
-        .arg(&cfg)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let files: Vec<PathBuf> = std::fs::read_dir(&rec_dir)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .collect();
-    assert_eq!(files.len(), 1);
-    let file = &files[0];
-
-    let replay = |path: &Path| {
-        let (sock, addr) = udp();
-        let mut child = bin()
-            .args([
-                "run",
-                "--rate",
-                "max",
-                "--no-print",
-                "--udp",
-                &addr,
-                "--replay",
-            ])
-            .arg(path)
-            .args(["--config"])
-            .arg(&cfg)
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap();
-        let est = collect(&sock, &mut child, Duration::from_secs(60));
-        let out = child.wait_with_output().unwrap();
-        assert!(out.status.success());
-        (est, String::from_utf8_lossy(&out.stderr).into_owned())
-    };
+    let file = record(&dir, &cfg, 12);
+    let file = &file;
+    let replay = |path: &Path| replay(path, &cfg);
     let (a, _) = replay(file);
     let (b, _) = replay(file);
     assert_eq!(a.len(), 12);
     // Identical estimates, apart from the host's own clock.
-    let strip = |v: &[Estimate]| -> Vec<Estimate> {
-        v.iter()
-            .map(|e| Estimate {
-                receive_ns: 0,
-                publish_ns: 0,
-                latency_ms: 0.0,
-                detector_ms: 0.0,
-                ..e.clone()
-            })
-            .collect()
-    };
-    assert_eq!(strip(&a), strip(&b));
+    assert_eq!(strip_clock(&a), strip_clock(&b));
     // The ground truth travelled through the recording.
     check_against_truth(&a);
 
@@ -121,7 +70,97 @@ fn record_replay_twice_identical_and_truncated_replay() {
         "{} frames before the cut",
         c.len()
     );
-    assert_eq!(strip(&c), strip(&a[..c.len()]));
+    assert_eq!(strip_clock(&c), strip_clock(&a[..c.len()]));
+}
+
+#[test]
+fn two_workers_with_the_narrowed_search_replay_identically() {
+    // Each frame's search is narrowed by the prediction made after the frame two before it,
+    // whichever worker finishes first: the estimates do not depend on timing.
+    let dir = tmpdir("replay2");
+    let cfg = small_config(
+        &dir,
+        "[pipeline]\nworkers = 2\nthreads = 1\nnarrow_search = true\n",
+    );
+    let file = record(&dir, &cfg, 30);
+    let runs: Vec<Vec<Estimate>> = (0..3).map(|_| replay(&file, &cfg).0).collect();
+    assert_eq!(runs[0].len(), 30);
+    let tracked = runs[0]
+        .iter()
+        .filter(|e| {
+            e.guidance
+                .as_ref()
+                .and_then(|g| g.lateral_offset_m)
+                .is_some()
+        })
+        .count();
+    assert!(tracked >= 25, "only {tracked} of 30 frames tracked");
+    for r in &runs[1..] {
+        assert_eq!(strip_clock(r), strip_clock(&runs[0]));
+    }
+    check_against_truth(&runs[0]);
+}
+
+/// Records `frames` frames of the synthetic source as `cfg` sets it into `dir/rec`; the file.
+fn record(dir: &Path, cfg: &Path, frames: u32) -> PathBuf {
+    let rec_dir = dir.join("rec");
+    let out = bin()
+        .args(["record", "--out"])
+        .arg(&rec_dir)
+        .args(["--frames", &frames.to_string(), "--no-print", "--config"])
+        .arg(cfg)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let files: Vec<PathBuf> = std::fs::read_dir(&rec_dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert_eq!(files.len(), 1);
+    files.into_iter().next().unwrap()
+}
+
+/// Replays `path` as fast as possible with `cfg`: the estimates (over UDP) and the log.
+fn replay(path: &Path, cfg: &Path) -> (Vec<Estimate>, String) {
+    let (sock, addr) = udp();
+    let mut child = bin()
+        .args([
+            "run",
+            "--rate",
+            "max",
+            "--no-print",
+            "--udp",
+            &addr,
+            "--replay",
+        ])
+        .arg(path)
+        .args(["--config"])
+        .arg(cfg)
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let est = collect(&sock, &mut child, Duration::from_secs(60));
+    let out = child.wait_with_output().unwrap();
+    assert!(out.status.success());
+    (est, String::from_utf8_lossy(&out.stderr).into_owned())
+}
+
+/// The estimates without what depends on the host's clock.
+fn strip_clock(v: &[Estimate]) -> Vec<Estimate> {
+    v.iter()
+        .map(|e| Estimate {
+            receive_ns: 0,
+            publish_ns: 0,
+            latency_ms: 0.0,
+            detector_ms: 0.0,
+            stage_ms: [0.0; 4],
+            ..e.clone()
+        })
+        .collect()
 }
 
 #[test]

@@ -20,6 +20,10 @@
 //! alive at once, whatever the input rate — for the GC2450C (5 MB a frame) with the defaults
 //! (2, 2, 4) that is 13 frames, 65 MB.
 
+pub mod prior;
+
+pub use prior::PriorBoard;
+
 use crate::camera::Mounting;
 use crate::check::{Check, Raw};
 use crate::detect::{Detection, DetectorPrior};
@@ -231,7 +235,7 @@ impl RawPipeline {
             100.0,
         );
         let options = PipelineOptions {
-            narrow_search: c.get(&self.narrow_search, false).then_some(NarrowSearch {
+            narrow_search: c.get(&self.narrow_search, true).then_some(NarrowSearch {
                 min_window_rad: min_window_deg.to_radians(),
                 sigmas,
                 ..NarrowSearch::new(Mounting::default())
@@ -415,10 +419,12 @@ impl Pipeline {
             run_source(hb, source, &limits, frames, to_record, rel)
         })?;
 
-        // Frame queue → detector workers (a ticket per frame) → estimate queue. The publisher
-        // leaves the tracker's prediction in `prior` for the workers' next frames.
-        let prior: PriorSlot = Arc::new(Mutex::new(None));
+        // Frame queue → detector workers (a ticket per frame) → estimate queue. With the
+        // narrowed search, the publisher leaves the tracker's prediction on the board for the
+        // workers' later frames.
         let workers = processors.len();
+        let prior = (opts.guidance.is_some() && opts.narrow_search.is_some())
+            .then(|| Arc::new(PriorBoard::new(workers)));
         for (i, proc) in processors.into_iter().enumerate() {
             let name: &'static str = WORKER_NAMES.get(i).copied().unwrap_or("detector");
             let (intake, done, min_quality) = (intake.clone(), done_tx.clone(), opts.min_quality);
@@ -435,7 +441,8 @@ impl Pipeline {
         out.tracking = opts
             .guidance
             .clone()
-            .map(|g| (Tracking::new(g, opts.narrow_search), prior));
+            .map(|g| Tracking::new(g, opts.narrow_search));
+        out.prior = prior;
         let status_interval = opts.status_interval;
         threads.spawn("publisher", move |hb| {
             run_publisher(hb, done_rx, order, out, status_interval)
@@ -688,7 +695,7 @@ fn run_worker(
     intake: &Mutex<Intake>,
     done: Sender<Done>,
     min_quality: f64,
-    prior: &PriorSlot,
+    prior: &Option<Arc<PriorBoard>>,
 ) {
     match proc.pool() {
         Some(pool) => pool.install(|| worker_loop(hb, proc, intake, done, min_quality, prior)),
@@ -703,7 +710,7 @@ fn worker_loop(
     intake: &Mutex<Intake>,
     done: Sender<Done>,
     min_quality: f64,
-    prior: &PriorSlot,
+    prior: &Option<Arc<PriorBoard>>,
 ) {
     let mut det = Detection::default();
     loop {
@@ -714,7 +721,9 @@ fn worker_loop(
             Err(RecvTimeoutError::Disconnected) => break,
         };
         hb.beat();
-        let p = *prior.lock().unwrap_or_else(|e| e.into_inner());
+        let p = prior
+            .as_ref()
+            .and_then(|b| b.prior_for(ticket, Duration::from_millis(100), || hb.beat()));
         let estimate = detect(
             hb.shared(),
             proc.as_mut(),
@@ -791,7 +800,9 @@ fn run_publisher(
             Err(RecvTimeoutError::Timeout) => {}
             Err(RecvTimeoutError::Disconnected) => disconnected = true,
         }
-        order.skip_lost(disconnected);
+        if order.skip_lost(disconnected) {
+            out.skipped_to(order.next_ticket);
+        }
         while let Some(d) = order.pop() {
             out.publish(sh, d);
         }
@@ -835,13 +846,17 @@ impl Reorder {
     }
 
     /// A ticket that can never come back (a worker died mid-frame, or all workers are gone,
-    /// `disconnected`): go on with what is waiting, in order.
-    fn skip_lost(&mut self, disconnected: bool) {
+    /// `disconnected`): go on with what is waiting, in order. True when tickets were skipped.
+    fn skip_lost(&mut self, disconnected: bool) -> bool {
         if disconnected || self.waiting.len() > self.max_waiting {
             if let Some(&t) = self.waiting.keys().next() {
-                self.next_ticket = self.next_ticket.max(t);
+                if t > self.next_ticket {
+                    self.next_ticket = t;
+                    return true;
+                }
             }
         }
+        false
     }
 
     /// The estimate whose turn it is, if it has arrived.
@@ -860,13 +875,11 @@ struct Outlet {
     record: Option<Queue<RecordItem>>,
     release: Release,
     last_seq: u64,
-    /// Row guidance in frame order, and the prior its prediction leaves for the workers'
-    /// next frames.
-    tracking: Option<(Tracking, PriorSlot)>,
+    /// Row guidance in frame order.
+    tracking: Option<Tracking>,
+    /// With the narrowed search: where the tracker's predictions go for the workers.
+    prior: Option<Arc<PriorBoard>>,
 }
-
-/// The detector prior the publisher leaves for the workers' next frames.
-type PriorSlot = Arc<Mutex<Option<DetectorPrior>>>;
 
 impl Outlet {
     fn new(
@@ -880,19 +893,22 @@ impl Outlet {
             release,
             last_seq: 0,
             tracking: None,
+            prior: None,
         }
     }
 
     fn publish(&mut self, sh: &Shared, done: Done) {
         let Done {
+            ticket,
             frame,
             detection,
             mut estimate,
-            ..
         } = done;
-        if let Some((t, slot)) = self.tracking.as_mut() {
+        if let Some(t) = self.tracking.as_mut() {
             let prior = t.track(&mut estimate);
-            *slot.lock().unwrap_or_else(|e| e.into_inner()) = prior;
+            if let Some(b) = &self.prior {
+                b.post(ticket, prior);
+            }
         }
         estimate.stamp_published(now_ns());
         self.last_seq = estimate.seq;
@@ -913,6 +929,13 @@ impl Outlet {
         };
         if let Some(previous) = sh.replace_latest(latest) {
             self.release.frame(previous);
+        }
+    }
+
+    /// Tickets below `next` will never come: the workers waiting for them go on.
+    fn skipped_to(&self, next: u64) {
+        if let Some(b) = &self.prior {
+            b.skip_to(next);
         }
     }
 
@@ -947,6 +970,9 @@ impl Outlet {
     }
 
     fn finish(&mut self) {
+        if let Some(b) = &self.prior {
+            b.close();
+        }
         for p in self.publishers.iter_mut() {
             p.finish();
         }
