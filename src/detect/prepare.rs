@@ -8,13 +8,15 @@
 //! the refit of rows on the smoothed image's pixels ([`super::refit`]), which reads them. The
 //! hot path allocates nothing once warmed up.
 
+use super::bands::{self, Band};
 use super::mask::{build_mask, find_fov, MaskOptions, MaskResult};
 use super::refit::{refit_rows, Candidates, NearFoot, RefitImage, RefitOptions, RowFits, Tiles};
 use super::sections::NearField;
-use super::smooth::{Gaussian, SmoothOptions};
-use super::threshold::{keep_brightest_on, ThresholdOptions, ThresholdResult};
+use super::smooth::{BandScratch, Gaussian, SmoothOptions};
+use super::threshold::{histogram, keep_counted, valid_pixels, Counts};
+use super::threshold::{ThresholdOptions, ThresholdResult};
 use super::types::{DetectError, GreyImage, Points, Row};
-use super::vegetation::{vegetation_image_on, working_factor, Binning, VegetationOptions};
+use super::vegetation::{working_factor, Binning, Vegetation, VegetationOptions};
 use crate::camera::Calibration;
 use crate::frame::{ImageView, PixelFormat};
 use nalgebra::Vector3;
@@ -73,6 +75,65 @@ pub struct PrepareResult {
     pub setup_rebuilt: bool,
 }
 
+/// A band's part of the preparation's fused pass: its scratch, and the rows and the
+/// histogram of its last frame.
+#[derive(Debug, Clone)]
+struct PrepBand {
+    smooth: BandScratch,
+    rows: std::ops::Range<usize>,
+    hist: [u32; 256],
+}
+
+impl Default for PrepBand {
+    fn default() -> Self {
+        PrepBand {
+            smooth: BandScratch::default(),
+            rows: 0..0,
+            hist: [0; 256],
+        }
+    }
+}
+
+/// The fused pass's outputs and inputs as bands of rows split them.
+struct Bands<'a> {
+    veg: &'a mut [u8],
+    smoothed: &'a mut [u8],
+    mask: &'a [u8],
+    width: usize,
+    scratch: &'a mut [PrepBand],
+}
+
+impl Band for Bands<'_> {
+    fn parts(&self) -> usize {
+        self.scratch.len()
+    }
+
+    fn split(self, rows: usize, parts: usize) -> (Self, Self) {
+        let at = rows * self.width;
+        let (v0, v1) = self.veg.split_at_mut(at);
+        let (s0, s1) = self.smoothed.split_at_mut(at);
+        let (m0, m1) = self.mask.split_at(at);
+        let (c0, c1) = self.scratch.split_at_mut(parts);
+        let width = self.width;
+        (
+            Bands {
+                veg: v0,
+                smoothed: s0,
+                mask: m0,
+                width,
+                scratch: c0,
+            },
+            Bands {
+                veg: v1,
+                smoothed: s1,
+                mask: m1,
+                width,
+                scratch: c1,
+            },
+        )
+    }
+}
+
 /// Per-image-size setup.
 #[derive(Debug, Clone)]
 struct Setup {
@@ -84,6 +145,8 @@ struct Setup {
     view_cal: Calibration,
     work_cal: Calibration,
     mask: Vec<u8>,
+    /// The mask's valid pixels.
+    valid: u64,
     rays: Vec<[f32; 3]>,
     solid: Vec<f32>,
     tiles: Tiles,
@@ -102,7 +165,8 @@ pub struct Preparer {
     setup: Option<Setup>,
     veg: GreyImage,
     smoothed: GreyImage,
-    tmp: Vec<u8>,
+    /// Per band of the fused pass: its scratch, rows and histogram.
+    bands: Vec<PrepBand>,
     kept: Vec<u32>,
     /// The threshold's second half's kept pixels, when split across threads.
     spare: Vec<u32>,
@@ -136,7 +200,7 @@ impl Preparer {
             setup: None,
             veg: GreyImage::default(),
             smoothed: GreyImage::default(),
-            tmp: Vec::new(),
+            bands: Vec::new(),
             kept: Vec::new(),
             spare: Vec::new(),
             candidates: Candidates::default(),
@@ -215,7 +279,6 @@ impl Preparer {
             &mut rays,
             &mut solid,
         )?;
-        let n = mask.len();
         let (ww, wh) = (
             work_cal.model.width as usize,
             work_cal.model.height as usize,
@@ -228,7 +291,6 @@ impl Preparer {
         );
         self.veg.resize(ww, wh);
         self.smoothed.resize(ww, wh);
-        self.tmp.resize(n, 0);
         self.kept.reserve(self.opts.threshold.target_points() + 1);
         self.candidates = Candidates::with_capacity(mask_result.valid);
         tracing::debug!(
@@ -246,6 +308,7 @@ impl Preparer {
             factor,
             view_cal,
             work_cal,
+            valid: valid_pixels(&mask),
             mask,
             rays,
             solid,
@@ -302,6 +365,12 @@ impl Preparer {
 
     /// [`Self::run`] with the vegetation image, the smoothing and the threshold split across
     /// `pool`'s threads when there is one: the same points.
+    ///
+    /// The vegetation image, its smoothing and the threshold's histogram are one pass, band
+    /// by band ([`bands::each`]) and strip by strip within a band
+    /// ([`Gaussian::apply_band`]): each strip's rows are computed, smoothed and counted
+    /// while they are in the cache. The threshold then chooses its level from the bands'
+    /// histograms and collects the points from the smoothed image.
     pub fn run_on(
         &mut self,
         view: &ImageView,
@@ -310,15 +379,87 @@ impl Preparer {
     ) -> Result<PrepareResult, DetectError> {
         let rebuilt = self.ensure_setup(view)?;
         let s = self.setup.as_ref().expect("setup just ensured");
-        vegetation_image_on(view, &self.opts.vegetation, s.bin2, &mut self.veg, pool)?;
-        let (w, h) = (self.veg.width, self.veg.height);
-        let (veg, smoothed) = (&self.veg.data, &mut self.smoothed.data);
-        self.gauss
-            .apply_on(veg, w, h, &mut self.tmp, smoothed, pool)?;
-        let thr = keep_brightest_on(
+        let veg = Vegetation::new(view, &self.opts.vegetation, s.bin2)?;
+        let (w, h) = veg.size();
+        if s.mask.len() != w * h {
+            return Err(DetectError::Buffer(format!(
+                "prepare: a {w}x{h} working image with a mask of {} pixels",
+                s.mask.len()
+            )));
+        }
+        self.veg.resize(w, h);
+        self.smoothed.resize(w, h);
+        let threads = pool.map_or(1, |p| p.current_num_threads());
+        if self.bands.len() < threads {
+            self.bands.resize_with(threads, PrepBand::default);
+        }
+        let band = Bands {
+            veg: &mut self.veg.data,
+            smoothed: &mut self.smoothed.data,
+            mask: &s.mask,
+            width: w,
+            scratch: &mut self.bands[..],
+        };
+        let gauss = &self.gauss;
+        let failed = std::sync::atomic::AtomicBool::new(false);
+        let parts = bands::each(pool, h, band, &|rows, b: Bands| {
+            let (mask, sc) = (b.mask, &mut b.scratch[0]);
+            sc.rows = rows.clone();
+            sc.hist = [0; 256];
+            let y0 = rows.start;
+            let hist = &mut sc.hist;
+            let r = gauss.apply_band(
+                w,
+                h,
+                rows,
+                b.veg,
+                b.smoothed,
+                &mut sc.smooth,
+                |r, out| veg.rows(r, out),
+                |r, smoothed| {
+                    let m = &mask[(r.start - y0) * w..(r.end - y0) * w];
+                    for (t, c) in hist.iter_mut().zip(histogram(smoothed, m)) {
+                        *t += c;
+                    }
+                },
+            );
+            if r.is_err() {
+                failed.store(true, std::sync::atomic::Ordering::Relaxed);
+            }
+        });
+        if failed.into_inner() {
+            return Err(DetectError::Buffer(format!(
+                "prepare: the bands of a {w}x{h} working image do not match it"
+            )));
+        }
+        let used = &self.bands[..parts];
+        let mut counts = Counts {
+            hist: [0; 256],
+            valid: s.valid,
+            first: None,
+        };
+        for b in used {
+            for (t, &c) in counts.hist.iter_mut().zip(&b.hist) {
+                *t += c;
+            }
+        }
+        // The points are collected in two parts at once, split where the bands of the
+        // first half of the threads end.
+        if used.len() > 1 {
+            let firsts = &used[..used.len() / 2];
+            let mut first = [0u32; 256];
+            for b in firsts {
+                for (t, &c) in first.iter_mut().zip(&b.hist) {
+                    *t += c;
+                }
+            }
+            counts.first = Some((firsts[firsts.len() - 1].rows.end * w, first));
+        }
+        let thr = keep_counted(
             &self.smoothed.data,
             &s.mask,
             &self.opts.threshold,
+            &counts,
             &mut self.kept,
             pool.map(|p| (p, &mut self.spare)),
         )?;
@@ -415,5 +556,87 @@ impl Preparer {
     /// component along it, relative to the image's noise (NaN where not estimated).
     pub fn row_variances(&self) -> &[f64] {
         &self.fits.along_var
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::detect::smooth::SmoothOptions;
+    use crate::detect::threshold::keep_brightest;
+    use crate::detect::vegetation::vegetation_image;
+    use crate::detect::DetectorOptions;
+
+    /// The preparation as separate passes over the whole image: the vegetation image, the
+    /// smoothing, then the threshold.
+    fn separate_passes(
+        p: &Preparer,
+        view: &ImageView,
+    ) -> (Vec<u8>, Vec<u8>, Vec<u32>, ThresholdResult) {
+        let s = p.setup.as_ref().unwrap();
+        let mut veg = GreyImage::default();
+        vegetation_image(view, &p.opts.vegetation, s.bin2, &mut veg).unwrap();
+        let (mut tmp, mut smoothed) = (Vec::new(), vec![0u8; veg.data.len()]);
+        p.gauss
+            .apply(&veg.data, veg.width, veg.height, &mut tmp, &mut smoothed)
+            .unwrap();
+        let mut kept = Vec::new();
+        let t = keep_brightest(&smoothed, &s.mask, &p.opts.threshold, &mut kept).unwrap();
+        (veg.data, smoothed, kept, t)
+    }
+
+    #[test]
+    fn the_fused_pass_keeps_the_separate_passes_points_on_any_threads() {
+        let pool = |n| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(n)
+                .build()
+                .unwrap()
+        };
+        let pools = [None, Some(pool(1)), Some(pool(2)), Some(pool(3))];
+        // Bayer (quads), Mono8 binned and not, RGB; a working image whose height is not a
+        // multiple of the strips or the bands; σ 0 (a copy) and a wide kernel
+        let cases = [
+            (PixelFormat::BayerRggb8, 482, 398, 0.8, 4000),
+            (PixelFormat::Mono8, 242, 300, 1.5, 700),
+            (PixelFormat::Mono8, 101, 120, 1.5, 700),
+            (PixelFormat::Rgb8, 130, 162, 0.0, 300),
+            (PixelFormat::Rgb8, 130, 162, 0.8, 300),
+            (PixelFormat::BayerRggb8, 300, 260, 3.0, 1_000_000),
+        ];
+        for (i, (format, height, width, sigma, target)) in cases.into_iter().enumerate() {
+            let cal = crate::camera::ideal_fisheye(height, width).unwrap();
+            let mut opts = DetectorOptions::default().prepare();
+            opts.smooth = SmoothOptions { sigma_px: sigma };
+            opts.threshold.target_points = Some(target);
+            if i == 1 || i == 4 {
+                opts.binning = Binning::Half;
+            }
+            let n = (height * width) as usize * format.bytes_per_pixel();
+            let mut data = crate::detect::noise_bytes(height as u64 ^ 0xfeed, n);
+            // a run of one value: pixels at the level thinned across the bands
+            for v in data.iter_mut().skip(n / 3).take(n / 5) {
+                *v = 230;
+            }
+            let view = ImageView::new(width, height, format, &data).unwrap();
+            let mut p = Preparer::new(&cal, &opts).unwrap();
+            let mut points = Points::default();
+            for (k, pool) in pools.iter().enumerate() {
+                let r = p.run_on(&view, &mut points, pool.as_ref()).unwrap();
+                assert_eq!(r.setup_rebuilt, k == 0);
+                let (veg, smoothed, kept, t) = separate_passes(&p, &view);
+                let what = format!("{format:?} {width}x{height} σ {sigma}, pool {k}");
+                assert_eq!(p.veg.data, veg, "{what}");
+                assert_eq!(p.smoothed.data, smoothed, "{what}");
+                assert_eq!(
+                    (p.kept.as_slice(), p.last_threshold),
+                    (&kept[..], t),
+                    "{what}"
+                );
+                assert_eq!(r.threshold, t);
+                assert!(t.kept > 0, "{what}");
+                assert_eq!(points.rays.len(), kept.len());
+            }
+        }
     }
 }

@@ -125,10 +125,98 @@ impl Gaussian {
         });
         let tmp = &tmp[..];
         bands::rows(pool, dst, width, &|rows, d: &mut [u8]| {
-            vertical(k, tmp, width, height, rows, d)
+            vertical(k, tmp, 0, width, height, rows, d)
         });
         Ok(())
     }
+
+    /// The rows `rows` of an image `width` × `height` smoothed into `dst` (which holds just
+    /// them), in strips of [`STRIP`] rows, each smoothed as soon as the rows it reads are
+    /// there, so that its source rows are still in the cache: `fill(r, out)` writes the
+    /// source image's rows `r` into `out` (each row once: the band's own rows into `src`,
+    /// which holds just them, the rows beyond the band that the filter reaches into
+    /// `scratch`'s), and `done(r, smoothed)` is handed each strip once it is smoothed. The
+    /// rows are [`Self::apply`]'s to the bit. Allocates only while `scratch` grows.
+    #[allow(clippy::too_many_arguments)]
+    pub fn apply_band(
+        &self,
+        width: usize,
+        height: usize,
+        rows: Range<usize>,
+        src: &mut [u8],
+        dst: &mut [u8],
+        scratch: &mut BandScratch,
+        mut fill: impl FnMut(Range<usize>, &mut [u8]),
+        mut done: impl FnMut(Range<usize>, &[u8]),
+    ) -> Result<(), DetectError> {
+        let n = rows.len() * width;
+        if rows.end > height || src.len() != n || dst.len() != n {
+            return Err(DetectError::Buffer(format!(
+                "smooth: rows {rows:?} of a {width}x{height} image need {n} pixels, source has {}, destination {}",
+                src.len(),
+                dst.len()
+            )));
+        }
+        let (k, r, w) = (&self.kernel[..], self.radius, width);
+        let (y0, y1) = (rows.start, rows.end);
+        // The horizontal pass's rows [first, next) of the image.
+        let window = &mut scratch.window;
+        window.resize((STRIP + 2 * r) * w, 0);
+        scratch.halo.resize(r * w, 0);
+        let mut first = y0.saturating_sub(r);
+        let mut next = first;
+        let mut s0 = y0;
+        while s0 < y1 {
+            let s1 = (s0 + STRIP).min(y1);
+            let (lo, hi) = (s0.saturating_sub(r), (s1 + r).min(height));
+            if lo > first {
+                window.copy_within((lo - first) * w..(next - first) * w, 0);
+                first = lo;
+            }
+            while next < hi {
+                // The band's own rows, or those above or below it.
+                let (a, b) = match next {
+                    y if y < y0 => (y, y0),
+                    y if y < y1 => (y, y1.min(hi)),
+                    y => (y, hi),
+                };
+                let from: &mut [u8] = if (y0..y1).contains(&a) {
+                    &mut src[(a - y0) * w..(b - y0) * w]
+                } else {
+                    &mut scratch.halo[..(b - a) * w]
+                };
+                fill(a..b, from);
+                horizontal(k, from, w, &mut window[(a - first) * w..(b - first) * w]);
+                next = b;
+            }
+            let out = &mut dst[(s0 - y0) * w..(s1 - y0) * w];
+            vertical(
+                k,
+                &window[..(next - first) * w],
+                first,
+                w,
+                height,
+                s0..s1,
+                out,
+            );
+            done(s0..s1, out);
+            s0 = s1;
+        }
+        Ok(())
+    }
+}
+
+/// Rows per strip of [`Gaussian::apply_band`]: a strip's source, its passes and the mask
+/// beside it stay within a core's cache.
+pub const STRIP: usize = 32;
+
+/// A band's scratch for [`Gaussian::apply_band`] (grown on first use).
+#[derive(Debug, Clone, Default)]
+pub struct BandScratch {
+    /// The horizontal pass's rows a strip reads.
+    window: Vec<u8>,
+    /// Source rows beyond the band.
+    halo: Vec<u8>,
 }
 
 /// The horizontal pass of [`Gaussian::apply`] (`kernel`: 2·radius + 1 weights summing to
@@ -184,12 +272,14 @@ fn horizontal(kernel: &[u32], src: &[u8], width: usize, tmp: &mut [u8]) {
     }
 }
 
-/// The vertical pass of [`Gaussian::apply`]: the columns of `tmp` smoothed into the rows
-/// `rows` of the image, which `dst` holds.
+/// The vertical pass of [`Gaussian::apply`]: the columns of `tmp` (the horizontal pass's
+/// rows from row `first` of the image on) smoothed into the rows `rows` of the image, which
+/// `dst` holds.
 #[multiversion(targets("x86_64+avx2"))]
 fn vertical(
     kernel: &[u32],
     tmp: &[u8],
+    first: usize,
     width: usize,
     height: usize,
     rows: Range<usize>,
@@ -206,8 +296,9 @@ fn vertical(
             let mut acc = [128u16; CHUNK];
             let acc = &mut acc[..len];
             let row = |j: usize| {
-                let yy =
-                    (y as isize + j as isize - r as isize).clamp(0, height as isize - 1) as usize;
+                let yy = (y as isize + j as isize - r as isize).clamp(0, height as isize - 1)
+                    as usize
+                    - first;
                 &tmp[yy * width + x0..yy * width + x0 + len]
             };
             for j in 0..r {
@@ -280,6 +371,106 @@ mod tests {
                 assert_eq!(got, want, "sigma {sigma}, {width}x{height}, {n} threads");
             }
         }
+    }
+
+    /// `g.apply_band` over the bands `cuts` of `src` (each filled from `src` itself), with
+    /// the strips each band hands on.
+    fn by_bands(
+        g: &Gaussian,
+        src: &[u8],
+        width: usize,
+        height: usize,
+        cuts: &[usize],
+    ) -> (Vec<u8>, Vec<Range<usize>>) {
+        let (mut veg, mut dst) = (vec![0u8; src.len()], vec![0u8; src.len()]);
+        let mut strips = Vec::new();
+        let mut scratch = BandScratch::default();
+        let mut filled = vec![0u32; height];
+        for b in cuts.windows(2) {
+            let rows = b[0]..b[1];
+            let span = rows.start * width..rows.end * width;
+            g.apply_band(
+                width,
+                height,
+                rows,
+                &mut veg[span.clone()],
+                &mut dst[span],
+                &mut scratch,
+                |r, out| {
+                    out.copy_from_slice(&src[r.start * width..r.end * width]);
+                    for y in r {
+                        filled[y] += 1;
+                    }
+                },
+                |r, out| {
+                    assert_eq!(
+                        out,
+                        &dst_of(g, src, width, height)[r.start * width..r.end * width]
+                    );
+                    strips.push(r);
+                },
+            )
+            .unwrap();
+        }
+        // every row of a band filled once, and the band's neighbours' rows it reaches
+        let r = g.radius;
+        for (y, &n) in filled.iter().enumerate() {
+            let reached = cuts
+                .windows(2)
+                .filter(|b| y + r >= b[0] && y < b[1] + r)
+                .count() as u32;
+            assert_eq!(n, reached, "row {y} filled {n} times");
+        }
+        assert_eq!(veg, src, "the band's own rows are filled in place");
+        (dst, strips)
+    }
+
+    fn dst_of(g: &Gaussian, src: &[u8], width: usize, height: usize) -> Vec<u8> {
+        let (mut tmp, mut dst) = (Vec::new(), vec![0u8; width * height]);
+        g.apply(src, width, height, &mut tmp, &mut dst).unwrap();
+        dst
+    }
+
+    #[test]
+    fn bands_filled_strip_by_strip_are_the_whole_image_to_the_bit() {
+        for (sigma, width, height) in [
+            (0.8, 300, 211),
+            (1.5, 97, 100),
+            (3.0, 40, 9),
+            (0.0, 33, 70),
+            (2.0, 3, 40),
+        ] {
+            let g = Gaussian::new(&SmoothOptions { sigma_px: sigma }).unwrap();
+            let src = crate::detect::noise_bytes(0x77 ^ width as u64, width * height);
+            let want = dst_of(&g, &src, width, height);
+            let mut cuts_list = vec![vec![0, height], vec![0, height / 2, height]];
+            cuts_list.push(vec![0, 1, 2, STRIP + 1, height.max(STRIP + 1)]);
+            cuts_list.push((0..=height).collect());
+            for cuts in cuts_list {
+                if cuts.windows(2).any(|b| b[0] > b[1]) || cuts.last() != Some(&height) {
+                    continue;
+                }
+                let (got, strips) = by_bands(&g, &src, width, height, &cuts);
+                assert_eq!(got, want, "sigma {sigma}, {width}x{height}, bands {cuts:?}");
+                let rows: usize = strips.iter().map(|r| r.len()).sum();
+                assert_eq!(rows, height);
+                assert!(strips.iter().all(|r| r.len() <= STRIP));
+            }
+        }
+        // bad sizes are named
+        let g = Gaussian::new(&SmoothOptions { sigma_px: 1.0 }).unwrap();
+        let (mut a, mut b) = (vec![0u8; 10], vec![0u8; 10]);
+        let e = g.apply_band(
+            5,
+            3,
+            1..4,
+            &mut a,
+            &mut b,
+            &mut BandScratch::default(),
+            |_, _| {},
+            |_, _| {},
+        );
+        assert!(e.is_err());
     }
 
     #[test]

@@ -104,11 +104,10 @@ pub fn keep_brightest_on(
     if image.len() > u32::MAX as usize {
         return Err(DetectError::Buffer("threshold: image too large".into()));
     }
-    out.clear();
     // the halves split at a block's start, so that each scans the blocks the whole would
     let mid = (image.len() / 2) / BLOCK * BLOCK;
     let halves = pool.filter(|_| mid > 0);
-    let (hist, first, valid) = match &halves {
+    let counts = match &halves {
         Some((pool, _)) => {
             let ((h1, v1), (h2, v2)) = pool.join(
                 || {
@@ -124,14 +123,66 @@ pub fn keep_brightest_on(
                     )
                 },
             );
-            (std::array::from_fn(|i| h1[i] + h2[i]), h1, v1 + v2)
+            Counts {
+                hist: std::array::from_fn(|i| h1[i] + h2[i]),
+                valid: v1 + v2,
+                first: Some((mid, h1)),
+            }
         }
-        None => (histogram(image, mask), [0; 256], valid_pixels(mask)),
+        None => Counts {
+            hist: histogram(image, mask),
+            valid: valid_pixels(mask),
+            first: None,
+        },
     };
-    let median = median(&hist, image.len() as u64 - valid, valid);
+    keep_counted(image, mask, opts, &counts, out, halves)
+}
+
+/// What [`keep_counted`] chooses the level from: the image's histogram as [`histogram`]
+/// counts it, its number of valid pixels ([`valid_pixels`]), and, to scan it in two parts,
+/// where the second starts and the first's histogram.
+#[derive(Debug, Clone)]
+pub struct Counts {
+    pub hist: [u32; 256],
+    pub valid: u64,
+    pub first: Option<(usize, [u32; 256])>,
+}
+
+/// [`keep_brightest_on`] from the image's [`Counts`] (counted where the image was made):
+/// the level chosen from them, then the kept pixels collected, in the two parts at once on
+/// `pool`'s threads when the counts split the image and there is a pool (`spare` holds the
+/// second part's before they join `out`): the same pixels in the same order either way.
+pub fn keep_counted(
+    image: &[u8],
+    mask: &[u8],
+    opts: &ThresholdOptions,
+    counts: &Counts,
+    out: &mut Vec<u32>,
+    pool: Option<(&ThreadPool, &mut Vec<u32>)>,
+) -> Result<ThresholdResult, DetectError> {
+    if image.len() != mask.len() {
+        return Err(DetectError::Buffer(format!(
+            "threshold: image has {} pixels, mask {}",
+            image.len(),
+            mask.len()
+        )));
+    }
+    if let Some((mid, _)) = counts.first.filter(|(mid, _)| *mid > image.len()) {
+        return Err(DetectError::Buffer(format!(
+            "threshold: the second part starts at pixel {mid} of {}",
+            image.len()
+        )));
+    }
+    opts.validate()?;
+    if image.len() > u32::MAX as usize {
+        return Err(DetectError::Buffer("threshold: image too large".into()));
+    }
+    out.clear();
+    let (hist, valid) = (&counts.hist, counts.valid);
+    let median = median(hist, image.len() as u64 - valid, valid);
     let lo = opts.min_level() as usize + 1;
     let candidates: u64 = hist[lo.min(256)..].iter().map(|&c| c as u64).sum();
-    let (level, stride) = choose_level(&hist, opts.target_points() as u64, lo, candidates);
+    let (level, stride) = choose_level(hist, opts.target_points() as u64, lo, candidates);
     let level_u8 = level.min(255) as u8;
     let level_ok = level_u8 as usize >= lo;
     let at = |s: usize, e: usize| Scan {
@@ -142,18 +193,18 @@ pub fn keep_brightest_on(
         level_ok,
         stride,
     };
-    match halves {
-        Some((pool, spare)) => {
-            // the second half starts where the first leaves the count of pixels at the level
+    match (pool, &counts.first) {
+        (Some((pool, spare)), Some((mid, first))) => {
+            // the second part starts where the first leaves the count of pixels at the level
             let phase = phase_after(first[level_u8 as usize] as u64, stride);
             spare.clear();
             pool.join(
-                || at(0, mid).collect(0, out),
-                || at(mid, image.len()).collect(phase, spare),
+                || at(0, *mid).collect(0, out),
+                || at(*mid, image.len()).collect(phase, spare),
             );
             out.extend_from_slice(spare);
         }
-        None => at(0, image.len()).collect(0, out),
+        _ => at(0, image.len()).collect(0, out),
     }
     Ok(ThresholdResult {
         level: level_u8,
@@ -171,7 +222,7 @@ const BLOCK: usize = 64;
 /// The histogram of `image` where `mask` is set; masked pixels land in bin 0 (mask bytes are
 /// 0 or 0xFF). Four histograms are interleaved so that runs of equal values do not serialise
 /// on one counter, and blocks the mask leaves out whole are only counted into bin 0.
-fn histogram(image: &[u8], mask: &[u8]) -> [u32; 256] {
+pub fn histogram(image: &[u8], mask: &[u8]) -> [u32; 256] {
     let mut hists = [[0u32; 256]; 4];
     let mut outside = 0u32;
     for (vb, mb) in image.chunks(BLOCK).zip(mask.chunks(BLOCK)) {
@@ -201,7 +252,7 @@ fn histogram(image: &[u8], mask: &[u8]) -> [u32; 256] {
 
 /// The number of valid (unmasked) pixels, counted in runs with 32-bit lanes, which vectorise
 /// four times wider than 64-bit ones.
-fn valid_pixels(mask: &[u8]) -> u64 {
+pub fn valid_pixels(mask: &[u8]) -> u64 {
     mask.chunks(1 << 20)
         .map(|c| c.iter().map(|&m| (m & 1) as u32).sum::<u32>() as u64)
         .sum()
@@ -385,6 +436,74 @@ mod tests {
             keep_brightest_on(&image, &mask, &opts, &mut got, Some((&pool, &mut spare))).unwrap();
         assert_eq!(r.stride, 15);
         assert!(got.windows(2).all(|w| w[1] - w[0] == 15), "{got:?}");
+    }
+
+    #[test]
+    fn counts_split_anywhere_keep_the_same_pixels() {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(2)
+            .build()
+            .unwrap();
+        let n = 5000;
+        let mut image = crate::detect::noise_bytes(7, n);
+        for v in image.iter_mut().skip(1000).take(1500) {
+            *v = 180;
+        }
+        let mask: Vec<u8> = (0..n)
+            .map(|i| if i % 300 < 40 { 0 } else { 0xFF })
+            .collect();
+        let whole = Counts {
+            hist: histogram(&image, &mask),
+            valid: valid_pixels(&mask),
+            first: None,
+        };
+        for target in [1, 100, 900, 4000] {
+            let opts = ThresholdOptions {
+                target_points: Some(target),
+                min_level: Some(10),
+            };
+            let mut want = Vec::new();
+            let t = keep_brightest(&image, &mask, &opts, &mut want).unwrap();
+            let (mut got, mut spare) = (Vec::new(), Vec::new());
+            assert_eq!(
+                keep_counted(&image, &mask, &opts, &whole, &mut got, None).unwrap(),
+                t
+            );
+            assert_eq!(got, want);
+            // split at any pixel, a block's start or not, the ends included
+            for mid in [0, 1, 63, 64, 1234, 2500, n] {
+                let counts = Counts {
+                    first: Some((mid, histogram(&image[..mid], &mask[..mid]))),
+                    ..whole.clone()
+                };
+                let r = keep_counted(
+                    &image,
+                    &mask,
+                    &opts,
+                    &counts,
+                    &mut got,
+                    Some((&pool, &mut spare)),
+                );
+                assert_eq!(
+                    (r.unwrap(), &got),
+                    (t, &want),
+                    "target {target}, split at {mid}"
+                );
+            }
+        }
+        let past = Counts {
+            first: Some((n + 1, [0; 256])),
+            ..whole
+        };
+        assert!(keep_counted(
+            &image,
+            &mask,
+            &ThresholdOptions::default(),
+            &past,
+            &mut Vec::new(),
+            None
+        )
+        .is_err());
     }
 
     #[test]

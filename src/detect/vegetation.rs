@@ -176,52 +176,99 @@ pub fn vegetation_image_on(
     out: &mut GreyImage,
     pool: Option<&ThreadPool>,
 ) -> Result<VegetationResult, DetectError> {
-    let (w, h) = (view.width as usize, view.height as usize);
-    let expected = w * h * view.format.bytes_per_pixel();
-    if view.data.len() != expected {
-        return Err(DetectError::Image {
-            height: view.height,
-            width: view.width,
-            problem: format!(
-                "{:?} needs {expected} bytes, has {}",
-                view.format,
-                view.data.len()
-            ),
-        });
-    }
-    let factor = working_factor(view.width, view.height, view.format, bin2)? as usize;
-    let (ow, oh) = (w / factor, h / factor);
+    let veg = Vegetation::new(view, opts, bin2)?;
+    let (ow, oh) = veg.size();
     out.resize(ow, oh);
-    let d = view.data;
-    let index = match opts.index {
-        VegetationIndex::Auto if view.format == PixelFormat::Rgb8 && !has_colour(d) => {
-            VegetationIndex::Luma
-        }
-        VegetationIndex::Auto => VegetationIndex::ExcessGreen,
-        other => other,
-    };
-    let layout = match (view.format, factor) {
-        (PixelFormat::Mono8, 1) => {
-            out.data.copy_from_slice(d);
-            return Ok(VegetationResult {
-                factor: 1,
-                width: ow,
-                height: oh,
+    bands::rows(pool, &mut out.data, ow, &|rows, o: &mut [u8]| {
+        veg.rows(rows, o)
+    });
+    Ok(VegetationResult {
+        factor: veg.factor as u32,
+        width: ow,
+        height: oh,
+    })
+}
+
+/// The vegetation image of one input image, row by row: [`Vegetation::rows`] computes any
+/// rows of it, each exactly as [`vegetation_image`] does, so a stage can compute them band
+/// by band, or strip by strip, where it reads them.
+pub struct Vegetation<'a> {
+    d: &'a [u8],
+    /// The input's width (pixels).
+    w: usize,
+    factor: usize,
+    ow: usize,
+    oh: usize,
+    /// `None`: Mono8 (copied, or binned 2×2).
+    layout: Option<Colour>,
+    index: VegetationIndex,
+}
+
+impl<'a> Vegetation<'a> {
+    /// Checks `view` (its bytes, and even sides where it is read by quads) and chooses the
+    /// index (`auto`: excess green, or brightness for an RGB image without colour).
+    pub fn new(
+        view: &ImageView<'a>,
+        opts: &VegetationOptions,
+        bin2: bool,
+    ) -> Result<Self, DetectError> {
+        let (w, h) = (view.width as usize, view.height as usize);
+        let expected = w * h * view.format.bytes_per_pixel();
+        if view.data.len() != expected {
+            return Err(DetectError::Image {
+                height: view.height,
+                width: view.width,
+                problem: format!(
+                    "{:?} needs {expected} bytes, has {}",
+                    view.format,
+                    view.data.len()
+                ),
             });
         }
-        (PixelFormat::Mono8, _) => None,
-        (PixelFormat::Rgb8, 1) => Some(Colour::Rgb),
-        (PixelFormat::Rgb8, _) => Some(Colour::RgbBinned),
-        (PixelFormat::BayerRggb8, _) => Some(Colour::Bayer),
-    };
-    bands::rows(pool, &mut out.data, ow, &|rows, o: &mut [u8]| {
-        let Some(layout) = layout else {
-            return mono_binned(d, w, ow, rows, o);
+        let factor = working_factor(view.width, view.height, view.format, bin2)? as usize;
+        let d = view.data;
+        let index = match opts.index {
+            VegetationIndex::Auto if view.format == PixelFormat::Rgb8 && !has_colour(d) => {
+                VegetationIndex::Luma
+            }
+            VegetationIndex::Auto => VegetationIndex::ExcessGreen,
+            other => other,
+        };
+        let layout = match (view.format, factor) {
+            (PixelFormat::Mono8, _) => None,
+            (PixelFormat::Rgb8, 1) => Some(Colour::Rgb),
+            (PixelFormat::Rgb8, _) => Some(Colour::RgbBinned),
+            (PixelFormat::BayerRggb8, _) => Some(Colour::Bayer),
+        };
+        Ok(Vegetation {
+            d,
+            w,
+            factor,
+            ow: w / factor,
+            oh: h / factor,
+            layout,
+            index,
+        })
+    }
+
+    /// The vegetation image's width and height.
+    pub fn size(&self) -> (usize, usize) {
+        (self.ow, self.oh)
+    }
+
+    /// The vegetation image's rows `rows` into `out`, which holds just them.
+    pub fn rows(&self, rows: Range<usize>, out: &mut [u8]) {
+        let (d, w, oh) = (self.d, self.w, self.oh);
+        let Some(layout) = self.layout else {
+            if self.factor == 1 {
+                return out.copy_from_slice(&d[rows.start * w..rows.end * w]);
+            }
+            return mono_binned(d, w, self.ow, rows, out);
         };
         // One instance per index, so that each inner loop inlines its index rather than
         // calling it through a pointer for every pixel.
-        let (r, oh) = (rows, oh);
-        match index {
+        let (r, o) = (rows, out);
+        match self.index {
             VegetationIndex::Luma => colour(layout, d, w, r, oh, o, luma),
             VegetationIndex::ChromaticExcessGreen => colour(layout, d, w, r, oh, o, chroma_exg),
             VegetationIndex::ExcessGreenMinusRed => colour(layout, d, w, r, oh, o, exg_exr),
@@ -229,12 +276,7 @@ pub fn vegetation_image_on(
                 colour(layout, d, w, r, oh, o, exg)
             }
         }
-    });
-    Ok(VegetationResult {
-        factor: factor as u32,
-        width: ow,
-        height: oh,
-    })
+    }
 }
 
 /// Mono8 input binned 2×2 (output rows `rows` into `out`, which holds just them): column

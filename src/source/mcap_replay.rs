@@ -12,6 +12,7 @@
 
 use super::{wait_due, Pacer, Poll, Rate, Source, SourceError, SourceState};
 use crate::frame::{Frame, PixelFormat};
+use crate::gige::{FramePool, Recycler};
 use crate::record::image_msg::{self, ImageMsg};
 use crate::record::salvage::{Damage, Event, Salvage, SalvageError};
 use crate::record::TRUTH_TOPIC;
@@ -42,6 +43,10 @@ enum Codec {
     FoxgloveJson,
 }
 
+/// Idle pixel buffers a replay keeps for reuse: one for the frame it holds back until it is
+/// due, one queued, one in the detector and one the pipeline keeps as the latest.
+const REPLAY_BUFFERS: usize = 4;
+
 /// Replays the images of an MCAP file.
 pub struct McapReplay {
     opts: McapReplayOptions,
@@ -59,7 +64,10 @@ pub struct McapReplay {
     seq: u64,
     frames_this_pass: u64,
     state: SourceState,
-    scratch: Vec<u8>,
+    /// Pixel buffers the pipeline gave back: each frame is decoded into one, so a replay
+    /// in steady state touches no fresh pages (and the detector's cores are not kept busy
+    /// faulting them in while it runs).
+    buffers: FramePool,
     calibration: Option<crate::camera::Calibration>,
 }
 
@@ -82,7 +90,7 @@ impl McapReplay {
             seq: 0,
             frames_this_pass: 0,
             state: SourceState::Starting,
-            scratch: Vec::new(),
+            buffers: FramePool::new(REPLAY_BUFFERS),
             calibration,
         })
     }
@@ -214,10 +222,13 @@ impl McapReplay {
                         }
                         continue;
                     }
+                    // A buffer the pipeline gave back (grown, not allocated, when it is
+                    // too small): the frame's pixels, or back to the pool.
+                    let (mut pixels, _) = self.buffers.take(0);
                     if self.image_channel.is_none()
                         && self.opts.topic.is_none()
                         && !self.defined.contains(&header.channel_id)
-                        && decode(Codec::Ros2Image, &data, &mut self.scratch).is_ok()
+                        && decode(Codec::Ros2Image, &data, &mut pixels).is_ok()
                     {
                         // The channel definitions were lost to damage (and no intact summary
                         // lends them): an undefined channel whose messages decode as
@@ -229,13 +240,14 @@ impl McapReplay {
                         );
                         self.image_channel = Some((header.channel_id, Codec::Ros2Image));
                     }
-                    let Some((id, codec)) = self.image_channel else {
+                    let Some((_, codec)) = self
+                        .image_channel
+                        .filter(|(id, _)| *id == header.channel_id)
+                    else {
+                        self.buffers.give_back(pixels);
                         continue;
                     };
-                    if header.channel_id != id {
-                        continue;
-                    }
-                    match decode(codec, &data, &mut self.scratch) {
+                    match decode(codec, &data, &mut pixels) {
                         Ok((stamp, w, h, format)) => {
                             let capture_ns = if stamp > 0 { stamp } else { header.log_time };
                             let truth = self
@@ -251,7 +263,7 @@ impl McapReplay {
                                 width: w,
                                 height: h,
                                 format,
-                                data: std::mem::take(&mut self.scratch),
+                                data: pixels,
                                 truth,
                             };
                             self.seq += 1;
@@ -259,11 +271,14 @@ impl McapReplay {
                             // Paced by the capture clock (the camera's frame rate).
                             return Ok(Some((capture_ns, frame)));
                         }
-                        Err(e) => tracing::warn!(
-                            file = %path.display(),
-                            message = header.sequence,
-                            "image message skipped: {e}"
-                        ),
+                        Err(e) => {
+                            self.buffers.give_back(pixels);
+                            tracing::warn!(
+                                file = %path.display(),
+                                message = header.sequence,
+                                "image message skipped: {e}"
+                            )
+                        }
                     }
                 }
                 _ => {}
@@ -434,6 +449,10 @@ impl Source for McapReplay {
     fn calibration(&self) -> Option<&crate::camera::Calibration> {
         self.calibration.as_ref()
     }
+
+    fn recycler(&self) -> Option<Recycler> {
+        Some(self.buffers.recycler())
+    }
 }
 
 #[cfg(test)]
@@ -478,6 +497,55 @@ mod tests {
                 Poll::End => return out,
             }
         }
+    }
+
+    #[test]
+    fn frames_are_decoded_into_the_buffers_given_back() {
+        let dir = std::env::temp_dir().join(format!("omnirow-mcap-pool-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let mut rec = Recorder::new(RecordOptions {
+            dir: dir.clone(),
+            reserve_bytes: 0,
+            ..RecordOptions::default()
+        })
+        .unwrap();
+        let src = frames(6);
+        for f in &src {
+            rec.write_frame(f).unwrap();
+        }
+        rec.finish().unwrap();
+        let mut replay = McapReplay::open(McapReplayOptions {
+            path: rec.files()[0].clone(),
+            rate: Rate::Max,
+            looping: false,
+            topic: None,
+        })
+        .unwrap();
+        let recycler = replay.recycler().expect("a replay recycles its buffers");
+        let mut next = || loop {
+            match replay.poll(Duration::from_millis(10)).unwrap() {
+                Poll::Frame(f) => return Some(f),
+                Poll::Idle => {}
+                Poll::End => return None,
+            }
+        };
+        // Frames 0 and 1 come in fresh buffers; frame 0's, given back, holds frame 2's
+        // pixels.
+        let first = next().unwrap();
+        let second = next().unwrap();
+        let at = first.data.as_ptr();
+        recycler.recycle(first.data);
+        let third = next().unwrap();
+        assert_eq!(third.data.as_ptr(), at);
+        for (a, b) in src[1..].iter().zip([&second, &third]) {
+            assert_eq!((a.seq, a.format, &a.data), (b.seq, b.format, &b.data));
+        }
+        let rest: Vec<Frame> = std::iter::from_fn(next).collect();
+        assert_eq!(rest.len(), 3);
+        for (a, b) in src[3..].iter().zip(&rest) {
+            assert_eq!(a.data, b.data);
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]
