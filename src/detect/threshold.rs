@@ -93,13 +93,7 @@ pub fn keep_brightest_on(
     out: &mut Vec<u32>,
     pool: Option<(&ThreadPool, &mut Vec<u32>)>,
 ) -> Result<ThresholdResult, DetectError> {
-    if image.len() != mask.len() {
-        return Err(DetectError::Buffer(format!(
-            "threshold: image has {} pixels, mask {}",
-            image.len(),
-            mask.len()
-        )));
-    }
+    same_size(image, mask)?;
     opts.validate()?;
     if image.len() > u32::MAX as usize {
         return Err(DetectError::Buffer("threshold: image too large".into()));
@@ -138,6 +132,18 @@ pub fn keep_brightest_on(
     keep_counted(image, mask, opts, &counts, out, halves)
 }
 
+/// The image and its mask have one byte per pixel each.
+fn same_size(image: &[u8], mask: &[u8]) -> Result<(), DetectError> {
+    if image.len() != mask.len() {
+        return Err(DetectError::Buffer(format!(
+            "threshold: image has {} pixels, mask {}",
+            image.len(),
+            mask.len()
+        )));
+    }
+    Ok(())
+}
+
 /// What [`keep_counted`] chooses the level from: the image's histogram as [`histogram`]
 /// counts it, its number of valid pixels ([`valid_pixels`]), and, to scan it in two parts,
 /// where the second starts and the first's histogram.
@@ -160,13 +166,7 @@ pub fn keep_counted(
     out: &mut Vec<u32>,
     pool: Option<(&ThreadPool, &mut Vec<u32>)>,
 ) -> Result<ThresholdResult, DetectError> {
-    if image.len() != mask.len() {
-        return Err(DetectError::Buffer(format!(
-            "threshold: image has {} pixels, mask {}",
-            image.len(),
-            mask.len()
-        )));
-    }
+    same_size(image, mask)?;
     if let Some((mid, _)) = counts.first.filter(|(mid, _)| *mid > image.len()) {
         return Err(DetectError::Buffer(format!(
             "threshold: the second part starts at pixel {mid} of {}",

@@ -499,23 +499,29 @@ mod tests {
         }
     }
 
-    #[test]
-    fn frames_are_decoded_into_the_buffers_given_back() {
-        let dir = std::env::temp_dir().join(format!("omnirow-mcap-pool-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
+    /// `n` frames recorded into a fresh `dir`: the file and the frames.
+    fn recorded(dir: &Path, n: u64) -> (PathBuf, Vec<Frame>) {
+        let _ = std::fs::remove_dir_all(dir);
         let mut rec = Recorder::new(RecordOptions {
-            dir: dir.clone(),
+            dir: dir.to_path_buf(),
             reserve_bytes: 0,
             ..RecordOptions::default()
         })
         .unwrap();
-        let src = frames(6);
+        let src = frames(n);
         for f in &src {
             rec.write_frame(f).unwrap();
         }
         rec.finish().unwrap();
+        (rec.files()[0].clone(), src)
+    }
+
+    #[test]
+    fn frames_are_decoded_into_the_buffers_given_back() {
+        let dir = std::env::temp_dir().join(format!("omnirow-mcap-pool-{}", std::process::id()));
+        let (path, src) = recorded(&dir, 6);
         let mut replay = McapReplay::open(McapReplayOptions {
-            path: rec.files()[0].clone(),
+            path,
             rate: Rate::Max,
             looping: false,
             topic: None,
@@ -551,19 +557,7 @@ mod tests {
     #[test]
     fn record_then_replay_and_truncated_recordings() {
         let dir = std::env::temp_dir().join(format!("omnirow-mcap-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        let mut rec = Recorder::new(RecordOptions {
-            dir: dir.clone(),
-            reserve_bytes: 0,
-            ..RecordOptions::default()
-        })
-        .unwrap();
-        let src = frames(5);
-        for f in &src {
-            rec.write_frame(f).unwrap();
-        }
-        rec.finish().unwrap();
-        let path = rec.files()[0].clone();
+        let (path, src) = recorded(&dir, 5);
         let back = replay_all(&path);
         assert_eq!(back.len(), 5);
         for (a, b) in src.iter().zip(&back) {
