@@ -200,7 +200,8 @@ pub struct PerceptionOptions {
     pub detector: DetectorOptions,
     /// Row guidance (`None`: the detector's estimate alone).
     pub guidance: Option<GuidanceOptions>,
-    /// With guidance, narrow each frame's search by the tracker's prediction.
+    /// With guidance, narrow each frame's search by the tracker's prediction (on by default,
+    /// as in the node: `[pipeline] narrow_search`).
     pub narrow_search: bool,
     pub min_quality: f64,
     /// Threads each frame's independent parts run on ([`Detector::set_threads`]).
@@ -212,7 +213,7 @@ impl Default for PerceptionOptions {
         PerceptionOptions {
             detector: DetectorOptions::default(),
             guidance: Some(GuidanceOptions::default()),
-            narrow_search: false,
+            narrow_search: true,
             min_quality: DEFAULT_MIN_QUALITY,
             threads: 1,
         }

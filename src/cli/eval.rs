@@ -136,10 +136,7 @@ fn guidance(a: GuidanceArgs) -> anyhow::Result<ExitCode> {
             );
             cfg.perception()
         }
-        None => crate::perception::PerceptionOptions {
-            narrow_search: true,
-            ..Default::default()
-        },
+        None => crate::perception::PerceptionOptions::default(),
     };
     if a.no_narrow {
         step.narrow_search = false;
